@@ -1,0 +1,98 @@
+#include "core/file_util.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cctype>
+#include <fstream>
+#include <sstream>
+#include <fmt/format.h>
+
+#include "core/error.h"
+
+namespace crease {
+namespace fs = std::filesystem;
+
+namespace {
+fs::path TempPathFor(const fs::path& path) {
+  // Keep the extension last so extension-sniffing writers (OIIO, VTK) still work.
+  return path.parent_path() /
+         fmt::format(".{}.tmp-{}{}", path.stem().string(), ::getpid(), path.extension().string());
+}
+void EnsureParent(const fs::path& path) {
+  if (path.has_parent_path() && !path.parent_path().empty()) {
+    std::error_code ec;
+    fs::create_directories(path.parent_path(), ec);
+    if (ec) {
+      throw Error(fmt::format("{}: cannot create folder {}: {}", path.string(),
+                              path.parent_path().string(), ec.message()));
+    }
+  }
+}
+void Commit(const fs::path& tmp, const fs::path& path) {
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) {
+    fs::remove(tmp, ec);
+    throw Error(fmt::format("{}: cannot move the finished file into place: {}", path.string(),
+                            ec.message()));
+  }
+}
+}  // namespace
+
+void WriteFileAtomic(const fs::path& path, const std::function<void(std::ostream&)>& write) {
+  EnsureParent(path);
+  const fs::path tmp = TempPathFor(path);
+  try {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) throw Error(fmt::format("{}: cannot open for writing", path.string()));
+    write(out);
+    out.flush();
+    if (!out) throw Error(fmt::format("{}: write failed (disk full?)", path.string()));
+  } catch (...) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw;
+  }
+  Commit(tmp, path);
+}
+
+void WriteFileAtomicVia(const fs::path& path, const std::function<void(const fs::path&)>& write) {
+  EnsureParent(path);
+  const fs::path tmp = TempPathFor(path);
+  try {
+    write(tmp);
+    if (!fs::exists(tmp)) throw Error(fmt::format("{}: the writer produced no file", path.string()));
+  } catch (...) {
+    std::error_code ec;
+    fs::remove(tmp, ec);
+    throw;
+  }
+  Commit(tmp, path);
+}
+
+void RequireReadableFile(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) throw Error(fmt::format("{}: file does not exist", path.string()));
+  if (fs::is_directory(path, ec)) {
+    throw Error(fmt::format("{}: is a folder, expected a file", path.string()));
+  }
+}
+
+std::string ReadFileToString(const fs::path& path) {
+  RequireReadableFile(path);
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(fmt::format("{}: cannot open file", path.string()));
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string LowerExtension(const fs::path& path) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return ext;
+}
+
+}  // namespace crease

@@ -1,0 +1,35 @@
+// File helpers. Every output of crease is written atomically: to a temporary
+// name in the destination folder, then renamed over the destination, so a crash
+// or an error never leaves a half-written file behind.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <ostream>
+#include <string>
+
+namespace crease {
+
+// Calls `write(stream)` on a binary stream opened on "<path>.tmp-<pid>", then
+// renames it to `path`. Creates missing parent folders. If `write` throws or the
+// stream fails, the temporary is removed, `path` is left untouched and an Error
+// naming `path` is thrown (the original message is kept).
+void WriteFileAtomic(const std::filesystem::path& path,
+                     const std::function<void(std::ostream&)>& write);
+
+// Same for writers that need a file name (third-party libraries): `write` gets a
+// temporary path with the same extension as `path`, writes it, and on success the
+// file is renamed to `path`.
+void WriteFileAtomicVia(const std::filesystem::path& path,
+                        const std::function<void(const std::filesystem::path& tmp)>& write);
+
+// Reads a whole file; throws Error "<path>: cannot open file" when missing.
+std::string ReadFileToString(const std::filesystem::path& path);
+
+// Throws Error "<path>: file does not exist" / "is a directory" as appropriate.
+void RequireReadableFile(const std::filesystem::path& path);
+
+// Lower-case extension including the dot (".ply"), "" when none.
+std::string LowerExtension(const std::filesystem::path& path);
+
+}  // namespace crease

@@ -1,0 +1,56 @@
+// TriMesh — crease's triangle mesh: positions in millimetres, triangles, one
+// per-vertex UV chart and optional normals.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/types.h"
+
+namespace crease {
+
+struct TriMesh {
+  MatX3d V;   // #V×3 vertex positions, mm.
+  MatX3i F;   // #F×3 vertex indices per triangle, counter-clockwise seen from outside.
+  MatX2d UV;  // #V×2 texture coordinates (u right, v down, texel convention of DESIGN.md),
+              // one single chart; empty (0 rows) when the mesh has none.
+  MatX3d N;   // #V×3 unit vertex normals; empty when not computed/loaded.
+
+  int num_vertices() const { return static_cast<int>(V.rows()); }
+  int num_faces() const { return static_cast<int>(F.rows()); }
+  bool has_uv() const { return UV.rows() > 0; }
+  bool has_normals() const { return N.rows() > 0; }
+};
+
+struct MeshRequirements {
+  bool uv = false;       // per-vertex UVs must be present
+  bool normals = false;  // per-vertex normals must be present
+  bool non_empty = true; // at least one triangle
+};
+
+// Checks that the mesh is well formed: F indices in [0, #V), no degenerate index
+// triples (a triangle using one vertex twice), finite V/UV/N, UV and N sized #V
+// when present, UV/N present when required. Throws Error whose message starts
+// with `what` (typically the file name) and names the offending element.
+void ValidateMesh(const TriMesh& mesh, const std::string& what,
+                  const MeshRequirements& req = {});
+
+// Axis-aligned bounding box of the vertices, as (min, max).
+std::pair<Eigen::Vector3d, Eigen::Vector3d> BoundingBox(const TriMesh& mesh);
+
+// Number of undirected edges, boundary edges (used by one triangle) and
+// non-manifold edges (used by more than two).
+struct EdgeStats {
+  int edges = 0;
+  int boundary = 0;
+  int non_manifold = 0;
+};
+EdgeStats ComputeEdgeStats(const TriMesh& mesh);
+
+// Triangles: area of each triangle, mm².
+Eigen::VectorXd TriangleAreas(const TriMesh& mesh);
+
+// Mean edge length, mm.
+double MeanEdgeLength(const TriMesh& mesh);
+
+}  // namespace crease

@@ -1,0 +1,17 @@
+// Eigen shorthands used across crease. Per-vertex and per-face arrays are
+// row-major so that one row (one vertex, one triangle) is contiguous in memory.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <Eigen/SparseCore>
+
+namespace crease {
+
+using MatX3d = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+using MatX2d = Eigen::Matrix<double, Eigen::Dynamic, 2, Eigen::RowMajor>;
+using MatX3f = Eigen::Matrix<float, Eigen::Dynamic, 3, Eigen::RowMajor>;
+using MatX3i = Eigen::Matrix<int, Eigen::Dynamic, 3, Eigen::RowMajor>;
+using SpMat = Eigen::SparseMatrix<double>;
+
+}  // namespace crease
