@@ -1,1 +1,115 @@
-// Filled in below.
+#include "core/image_io.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fmt/format.h>
+#include <OpenImageIO/imageio.h>
+#include <opencv2/core.hpp>
+
+#include "core/error.h"
+#include "core/file_util.h"
+
+namespace crease {
+namespace fs = std::filesystem;
+
+float SrgbToLinear(float v) {
+  return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f);
+}
+
+float LinearToSrgb(float v) {
+  v = std::clamp(v, 0.0f, 1.0f);
+  return v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;
+}
+
+namespace {
+bool IsFloatFormat(const std::string& ext) {
+  return ext == ".exr" || ext == ".hdr" || ext == ".pfm";
+}
+}  // namespace
+
+cv::Mat ReadImage(const fs::path& path, bool srgb) {
+  RequireReadableFile(path);
+  auto in = OIIO::ImageInput::open(path.string());
+  if (!in) {
+    throw Error(fmt::format("{}: cannot read image: {}", path.string(), OIIO::geterror()));
+  }
+  const OIIO::ImageSpec& spec = in->spec();
+  const int w = spec.width, h = spec.height, c = spec.nchannels;
+  if (w <= 0 || h <= 0 || c < 1 || c > 4) {
+    throw Error(fmt::format("{}: unsupported image layout {}x{} with {} channels", path.string(),
+                            w, h, c));
+  }
+  cv::Mat img(h, w, CV_32FC(c));
+  if (!in->read_image(0, 0, 0, c, OIIO::TypeDesc::FLOAT, img.data)) {
+    const std::string err = in->geterror();
+    throw Error(fmt::format("{}: cannot decode image data: {}", path.string(), err));
+  }
+  const bool integer = spec.format.is_floating_point() == false;
+  if (integer && srgb) {
+    const int color_channels = std::min(c, 3);  // alpha stays linear
+    for (int y = 0; y < h; ++y) {
+      float* row = img.ptr<float>(y);
+      for (int x = 0; x < w; ++x) {
+        for (int k = 0; k < color_channels; ++k) row[x * c + k] = SrgbToLinear(row[x * c + k]);
+      }
+    }
+  }
+  return img;
+}
+
+void WriteImage(const fs::path& path, const cv::Mat& image, const ImageWriteOptions& options) {
+  Require(!image.empty(), fmt::format("{}: refusing to write an empty image", path.string()));
+  const int c = image.channels();
+  Require(c >= 1 && c <= 4,
+          fmt::format("{}: cannot write an image with {} channels", path.string(), c));
+  Require(image.depth() == CV_32F || image.depth() == CV_8U,
+          fmt::format("{}: images must be CV_32F or CV_8U", path.string()));
+  Require(options.bits == 8 || options.bits == 16,
+          fmt::format("{}: ImageWriteOptions.bits must be 8 or 16", path.string()));
+  const std::string ext = LowerExtension(path);
+  cv::Mat data;
+  image.convertTo(data, CV_32F, image.depth() == CV_8U ? 1.0 / 255.0 : 1.0);
+  data = data.isContinuous() ? data : data.clone();
+
+  OIIO::TypeDesc format;
+  if (IsFloatFormat(ext)) {
+    format = options.half ? OIIO::TypeDesc::HALF : OIIO::TypeDesc::FLOAT;
+  } else {
+    format = options.bits == 16 ? OIIO::TypeDesc::UINT16 : OIIO::TypeDesc::UINT8;
+    if (!cv::checkRange(data)) {
+      throw Error(fmt::format("{}: image has NaN or infinite values; cannot store them in {}",
+                              path.string(), ext));
+    }
+    if (options.srgb && image.depth() == CV_32F) {
+      const int color_channels = std::min(c, 3);
+      for (int y = 0; y < data.rows; ++y) {
+        float* row = data.ptr<float>(y);
+        for (int x = 0; x < data.cols; ++x) {
+          for (int k = 0; k < color_channels; ++k) row[x * c + k] = LinearToSrgb(row[x * c + k]);
+        }
+      }
+    }
+  }
+  WriteFileAtomicVia(path, [&](const fs::path& tmp) {
+    auto out = OIIO::ImageOutput::create(path.string());
+    if (!out) {
+      throw Error(fmt::format("{}: no image writer for extension '{}': {}", path.string(), ext,
+                              OIIO::geterror()));
+    }
+    OIIO::ImageSpec spec(data.cols, data.rows, c, format);
+    if (format == OIIO::TypeDesc::UINT8 || format == OIIO::TypeDesc::UINT16) {
+      spec.attribute("oiio:ColorSpace", options.srgb ? "sRGB" : "Linear");
+    }
+    if (!out->open(tmp.string(), spec)) {
+      throw Error(fmt::format("{}: cannot open for writing: {}", path.string(), out->geterror()));
+    }
+    if (!out->write_image(OIIO::TypeDesc::FLOAT, data.data)) {
+      throw Error(fmt::format("{}: write failed: {}", path.string(), out->geterror()));
+    }
+    if (!out->close()) {
+      throw Error(fmt::format("{}: write failed: {}", path.string(), out->geterror()));
+    }
+  });
+}
+
+}  // namespace crease

@@ -1,0 +1,406 @@
+#include "core/face_rig.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <set>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/error.h"
+#include "core/file_util.h"
+
+namespace crease {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+const std::vector<std::string>& StandardRegionNames() {
+  static const std::vector<std::string> names = {"forehead",    "glabella",   "left_eye",
+                                                 "right_eye",   "left_cheek", "right_cheek",
+                                                 "nose",        "mouth",      "chin"};
+  return names;
+}
+
+std::vector<std::string> IbugLandmarkNames() {
+  std::vector<std::string> names;
+  for (int i = 1; i <= 68; ++i) names.push_back(fmt::format("ibug_{}", i));
+  return names;
+}
+
+MatX3d FaceRig::EvaluatePositions(const Eigen::VectorXd& identity,
+                                  const Eigen::VectorXd& expression) const {
+  Require(identity.size() <= num_identity(),
+          fmt::format("FaceRig::Evaluate: {} identity coefficients given, the rig has {}",
+                      identity.size(), num_identity()));
+  Require(expression.size() <= num_expressions(),
+          fmt::format("FaceRig::Evaluate: {} expression weights given, the rig has {}",
+                      expression.size(), num_expressions()));
+  Eigen::VectorXd flat = Eigen::Map<const Eigen::VectorXd>(neutral.V.data(), neutral.V.size());
+  if (identity.size() > 0) {
+    flat += identity_basis.leftCols(identity.size()).cast<double>() * identity;
+  }
+  if (expression.size() > 0) {
+    flat += expression_basis.leftCols(expression.size()).cast<double>() * expression;
+  }
+  MatX3d V(num_vertices(), 3);
+  Eigen::Map<Eigen::VectorXd>(V.data(), V.size()) = flat;
+  return V;
+}
+
+TriMesh FaceRig::Evaluate(const Eigen::VectorXd& identity, const Eigen::VectorXd& expression) const {
+  TriMesh m;
+  m.V = EvaluatePositions(identity, expression);
+  m.F = neutral.F;
+  m.UV = neutral.UV;
+  return m;
+}
+
+int FaceRig::ExpressionIndex(const std::string& name) const {
+  auto it = std::find(expression_names.begin(), expression_names.end(), name);
+  return it == expression_names.end() ? -1 : static_cast<int>(it - expression_names.begin());
+}
+
+int FaceRig::LandmarkIndex(const std::string& name) const {
+  for (size_t i = 0; i < landmarks.size(); ++i) {
+    if (landmarks[i].name == name) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+const RegionMask* FaceRig::FindRegion(const std::string& name) const {
+  for (const auto& r : regions) {
+    if (r.name == name) return &r;
+  }
+  return nullptr;
+}
+
+bool FaceRig::InRegion(const std::string& name, const Eigen::Vector2d& uv) const {
+  const RegionMask* r = FindRegion(name);
+  if (!r || !(uv.x() >= 0 && uv.x() < 1 && uv.y() >= 0 && uv.y() < 1)) return false;
+  const int i = static_cast<int>(uv.x() * r->mask.cols), j = static_cast<int>(uv.y() * r->mask.rows);
+  return r->mask.at<uint8_t>(j, i) != 0;
+}
+
+void FaceRig::Validate(const std::string& what) const {
+  ValidateMesh(neutral, what + " (neutral mesh)", {.uv = true});
+  const Eigen::Index rows = 3 * static_cast<Eigen::Index>(num_vertices());
+  Require(identity_basis.cols() == 0 || identity_basis.rows() == rows,
+          fmt::format("{}: identity basis has {} rows, expected 3 x {} vertices = {}", what,
+                      identity_basis.rows(), num_vertices(), rows));
+  Require(expression_basis.cols() == 0 || expression_basis.rows() == rows,
+          fmt::format("{}: expression basis has {} rows, expected 3 x {} vertices = {}", what,
+                      expression_basis.rows(), num_vertices(), rows));
+  Require(identity_basis.allFinite(), fmt::format("{}: identity basis has non-finite values", what));
+  Require(expression_basis.allFinite(), fmt::format("{}: expression basis has non-finite values", what));
+  Require(static_cast<int>(identity_names.size()) == num_identity(),
+          fmt::format("{}: {} identity names for {} identity modes", what, identity_names.size(), num_identity()));
+  Require(static_cast<int>(expression_names.size()) == num_expressions(),
+          fmt::format("{}: {} expression names for {} expressions", what, expression_names.size(),
+                      num_expressions()));
+  auto unique = [&](const std::vector<std::string>& names, const char* kind) {
+    std::set<std::string> seen;
+    for (const auto& n : names) {
+      Require(!n.empty(), fmt::format("{}: an {} name is empty", what, kind));
+      Require(seen.insert(n).second, fmt::format("{}: {} name '{}' appears twice", what, kind, n));
+    }
+  };
+  unique(identity_names, "identity");
+  unique(expression_names, "expression");
+  std::vector<std::string> lm_names;
+  for (const auto& l : landmarks) {
+    lm_names.push_back(l.name);
+    Require(l.vertex >= 0 && l.vertex < num_vertices(),
+            fmt::format("{}: landmark '{}' references vertex {}, the rig has {} vertices", what,
+                        l.name, l.vertex, num_vertices()));
+  }
+  unique(lm_names, "landmark");
+  std::vector<std::string> region_names;
+  for (const auto& r : regions) {
+    region_names.push_back(r.name);
+    Require(!r.mask.empty() && r.mask.type() == CV_8UC1 && r.mask.rows == r.mask.cols,
+            fmt::format("{}: region '{}' must be a square 8-bit mask", what, r.name));
+  }
+  unique(region_names, "region");
+  Require(original_vertex.empty() || static_cast<int>(original_vertex.size()) == num_vertices(),
+          fmt::format("{}: original_vertex has {} entries for {} vertices", what,
+                      original_vertex.size(), num_vertices()));
+}
+
+// ---------------------------------------------------------------------------
+// .crig I/O
+
+namespace {
+
+constexpr char kMagic[8] = {'C', 'R', 'E', 'A', 'S', 'R', 'I', 'G'};
+
+struct ArrayDesc {
+  std::string name, dtype;
+  std::vector<int64_t> shape;
+  size_t bytes() const {
+    size_t n = dtype == "f64" ? 8 : dtype == "u8" ? 1 : 4;
+    for (auto s : shape) n *= static_cast<size_t>(s);
+    return n;
+  }
+};
+
+template <class T>
+void WriteRaw(std::ostream& out, const T* data, size_t count) {
+  static_assert(std::endian::native == std::endian::little, "crease files are little-endian");
+  out.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(count * sizeof(T)));
+}
+
+}  // namespace
+
+void WriteRig(const fs::path& path, const FaceRig& rig) {
+  rig.Validate(path.string());
+  json header;
+  header["format"] = "crease rig";
+  header["source"] = rig.source;
+  header["units"] = "mm";
+  header["identity_names"] = rig.identity_names;
+  header["expression_names"] = rig.expression_names;
+  json lms = json::array();
+  for (const auto& l : rig.landmarks) lms.push_back({{"name", l.name}, {"vertex", l.vertex}});
+  header["landmarks"] = lms;
+  const int nv = rig.num_vertices(), nf = rig.neutral.num_faces();
+  std::vector<ArrayDesc> arrays = {
+      {"V", "f64", {nv, 3}},
+      {"F", "i32", {nf, 3}},
+      {"UV", "f64", {nv, 2}},
+      {"identity_basis", "f32", {rig.identity_basis.cols(), 3LL * nv}},
+      {"expression_basis", "f32", {rig.expression_basis.cols(), 3LL * nv}},
+      {"original_vertex", "i32", {static_cast<int64_t>(rig.original_vertex.size())}}};
+  for (const auto& r : rig.regions) arrays.push_back({"region:" + r.name, "u8", {r.mask.rows, r.mask.cols}});
+  json arr = json::array();
+  for (const auto& a : arrays) arr.push_back({{"name", a.name}, {"dtype", a.dtype}, {"shape", a.shape}});
+  header["arrays"] = arr;
+  const std::string header_text = header.dump();
+
+  WriteFileAtomic(path, [&](std::ostream& out) {
+    out.write(kMagic, 8);
+    const uint32_t version = FaceRig::kFormatVersion;
+    WriteRaw(out, &version, 1);
+    const uint64_t len = header_text.size();
+    WriteRaw(out, &len, 1);
+    out.write(header_text.data(), static_cast<std::streamsize>(header_text.size()));
+    WriteRaw(out, rig.neutral.V.data(), rig.neutral.V.size());
+    WriteRaw(out, rig.neutral.F.data(), rig.neutral.F.size());
+    WriteRaw(out, rig.neutral.UV.data(), rig.neutral.UV.size());
+    // Column-major (3·#V)×K: each mode contiguous, matching the declared shape [K, 3·#V].
+    WriteRaw(out, rig.identity_basis.data(), rig.identity_basis.size());
+    WriteRaw(out, rig.expression_basis.data(), rig.expression_basis.size());
+    WriteRaw(out, rig.original_vertex.data(), rig.original_vertex.size());
+    for (const auto& r : rig.regions) {
+      const cv::Mat m = r.mask.isContinuous() ? r.mask : r.mask.clone();
+      WriteRaw(out, m.data, m.total());
+    }
+  });
+}
+
+FaceRig ReadRig(const fs::path& path) {
+  const std::string what = path.string();
+  const std::string data = ReadFileToString(path);
+  size_t pos = 0;
+  auto take = [&](size_t n, const char* item) -> const char* {
+    if (pos + n > data.size()) {
+      throw Error(fmt::format("{}: truncated rig file (reading {}: need {} bytes at offset {}, file has {})",
+                              what, item, n, pos, data.size()));
+    }
+    const char* p = data.data() + pos;
+    pos += n;
+    return p;
+  };
+  if (data.size() < 8 || std::memcmp(data.data(), kMagic, 8) != 0) {
+    throw Error(fmt::format("{}: not a crease rig (.crig) file (bad magic number)", what));
+  }
+  pos = 8;
+  uint32_t version;
+  std::memcpy(&version, take(4, "version"), 4);
+  if (version != FaceRig::kFormatVersion) {
+    throw Error(fmt::format("{}: rig format version {} is not supported (this crease reads version {}); "
+                            "re-create the rig with this version of crease",
+                            what, version, FaceRig::kFormatVersion));
+  }
+  uint64_t len;
+  std::memcpy(&len, take(8, "header length"), 8);
+  if (len > data.size()) throw Error(fmt::format("{}: truncated rig file (header)", what));
+  json header;
+  try {
+    header = json::parse(std::string(take(len, "header"), len));
+  } catch (const json::exception& e) {
+    throw Error(fmt::format("{}: malformed rig header: {}", what, e.what()));
+  }
+  FaceRig rig;
+  try {
+    rig.source = header.value("source", "");
+    rig.identity_names = header.at("identity_names").get<std::vector<std::string>>();
+    rig.expression_names = header.at("expression_names").get<std::vector<std::string>>();
+    for (const auto& l : header.at("landmarks")) {
+      rig.landmarks.push_back({l.at("name").get<std::string>(), l.at("vertex").get<int>()});
+    }
+    for (const auto& a : header.at("arrays")) {
+      ArrayDesc d{a.at("name").get<std::string>(), a.at("dtype").get<std::string>(),
+                  a.at("shape").get<std::vector<int64_t>>()};
+      for (auto s : d.shape) {
+        if (s < 0 || s > (int64_t{1} << 34)) throw Error(fmt::format("{}: array '{}' has an invalid shape", what, d.name));
+      }
+      const char* p = take(d.bytes(), d.name.c_str());
+      auto dims = [&](size_t n) {
+        if (d.shape.size() != n) throw Error(fmt::format("{}: array '{}' must have {} dimensions", what, d.name, n));
+      };
+      auto dtype = [&](const char* t) {
+        if (d.dtype != t) throw Error(fmt::format("{}: array '{}' must be {}, is {}", what, d.name, t, d.dtype));
+      };
+      if (d.name == "V" || d.name == "UV") {
+        dims(2);
+        dtype("f64");
+        MatX3d* dst3 = d.name == "V" ? &rig.neutral.V : nullptr;
+        if (dst3) {
+          if (d.shape[1] != 3) throw Error(fmt::format("{}: array V must be #V x 3", what));
+          dst3->resize(d.shape[0], 3);
+          std::memcpy(dst3->data(), p, d.bytes());
+        } else {
+          if (d.shape[1] != 2) throw Error(fmt::format("{}: array UV must be #V x 2", what));
+          rig.neutral.UV.resize(d.shape[0], 2);
+          std::memcpy(rig.neutral.UV.data(), p, d.bytes());
+        }
+      } else if (d.name == "F") {
+        dims(2);
+        dtype("i32");
+        if (d.shape[1] != 3) throw Error(fmt::format("{}: array F must be #F x 3", what));
+        rig.neutral.F.resize(d.shape[0], 3);
+        std::memcpy(rig.neutral.F.data(), p, d.bytes());
+      } else if (d.name == "identity_basis" || d.name == "expression_basis") {
+        dims(2);
+        dtype("f32");
+        Eigen::MatrixXf& B = d.name == "identity_basis" ? rig.identity_basis : rig.expression_basis;
+        B.resize(d.shape[1], d.shape[0]);
+        std::memcpy(B.data(), p, d.bytes());
+      } else if (d.name == "original_vertex") {
+        dims(1);
+        dtype("i32");
+        rig.original_vertex.resize(d.shape[0]);
+        std::memcpy(rig.original_vertex.data(), p, d.bytes());
+      } else if (d.name.rfind("region:", 0) == 0) {
+        dims(2);
+        dtype("u8");
+        cv::Mat m(static_cast<int>(d.shape[0]), static_cast<int>(d.shape[1]), CV_8UC1);
+        std::memcpy(m.data, p, d.bytes());
+        rig.regions.push_back({d.name.substr(7), m});
+      }
+      // Unknown arrays (a later minor addition) are skipped.
+    }
+  } catch (const json::exception& e) {
+    throw Error(fmt::format("{}: malformed rig header: {}", what, e.what()));
+  }
+  // A basis with zero modes still needs the right row count for Validate.
+  if (rig.identity_basis.cols() == 0) rig.identity_basis.resize(3 * rig.neutral.V.rows(), 0);
+  if (rig.expression_basis.cols() == 0) rig.expression_basis.resize(3 * rig.neutral.V.rows(), 0);
+  rig.Validate(what);
+  return rig;
+}
+
+// ---------------------------------------------------------------------------
+// Regions from the iBUG-68 landmarks.
+
+std::vector<RegionMask> RegionsFromLandmarks(const FaceRig& rig, int size) {
+  Require(size >= 16, "RegionsFromLandmarks: size must be >= 16");
+  std::vector<Eigen::Vector2d> p(69);  // 1-based like the iBUG annotation
+  for (int i = 1; i <= 68; ++i) {
+    const int k = rig.LandmarkIndex(fmt::format("ibug_{}", i));
+    Require(k >= 0, fmt::format("RegionsFromLandmarks: the rig has no landmark 'ibug_{}' "
+                                "(the 68 iBUG landmarks are needed to derive region masks)", i));
+    p[i] = rig.neutral.UV.row(rig.landmarks[k].vertex).transpose() * size;
+  }
+  auto mean = [&](std::initializer_list<int> ids) {
+    Eigen::Vector2d m = Eigen::Vector2d::Zero();
+    for (int i : ids) m += p[i];
+    return Eigen::Vector2d(m / static_cast<double>(ids.size()));
+  };
+  // Face frame in UV: "up" from the chin to the nose bridge, "scale" the inter-ocular distance.
+  const Eigen::Vector2d eye_r = mean({37, 38, 39, 40, 41, 42}), eye_l = mean({43, 44, 45, 46, 47, 48});
+  const double iod = (eye_l - eye_r).norm();
+  Require(iod > 1e-6 * size, "RegionsFromLandmarks: the eye landmarks coincide in UV");
+  const Eigen::Vector2d up = (p[28] - p[9]).normalized();
+
+  auto to_poly = [](const std::vector<Eigen::Vector2d>& pts) {
+    std::vector<cv::Point> poly;
+    for (const auto& q : pts) poly.emplace_back(cvRound(q.x()), cvRound(q.y()));
+    return poly;
+  };
+  auto hull_mask = [&](std::vector<Eigen::Vector2d> pts, double grow) {
+    Eigen::Vector2d c = Eigen::Vector2d::Zero();
+    for (const auto& q : pts) c += q;
+    c /= static_cast<double>(pts.size());
+    for (auto& q : pts) q = c + grow * (q - c);
+    std::vector<cv::Point> hull;
+    cv::convexHull(to_poly(pts), hull);
+    cv::Mat m = cv::Mat::zeros(size, size, CV_8UC1);
+    cv::fillConvexPoly(m, hull, cv::Scalar(255));
+    return m;
+  };
+  std::vector<RegionMask> out;
+  auto brow_top = [&](int i) { return Eigen::Vector2d(p[i] + up * 0.9 * iod); };
+  // Forehead: above the brows, up to about 0.9 inter-ocular distances.
+  {
+    std::vector<Eigen::Vector2d> pts;
+    for (int i = 18; i <= 27; ++i) pts.push_back(p[i] + up * 0.12 * iod);
+    for (int i = 18; i <= 27; ++i) pts.push_back(brow_top(i));
+    out.push_back({"forehead", hull_mask(pts, 1.0)});
+  }
+  // Glabella: between the inner brow ends, from the nose bridge to above the brows.
+  {
+    const Eigen::Vector2d side = (p[23] - p[22]) * 0.5;
+    std::vector<Eigen::Vector2d> pts = {p[22] - 0.3 * side, p[23] + 0.3 * side,
+                                        p[28] + 0.1 * iod * up + 0.5 * side,
+                                        p[28] + 0.1 * iod * up - 0.5 * side,
+                                        p[22] + up * 0.35 * iod, p[23] + up * 0.35 * iod};
+    out.push_back({"glabella", hull_mask(pts, 1.0)});
+  }
+  // Eyes with their surroundings (crow's feet outside the outer corner, under-eye lines below).
+  auto eye_region = [&](std::initializer_list<int> eye, int outer, int inner) {
+    std::vector<Eigen::Vector2d> pts;
+    for (int i : eye) pts.push_back(p[i]);
+    const Eigen::Vector2d out_dir = (p[outer] - p[inner]).normalized();
+    pts.push_back(p[outer] + out_dir * 0.45 * iod);
+    pts.push_back(p[outer] + out_dir * 0.4 * iod + up * 0.2 * iod);
+    pts.push_back(p[outer] + out_dir * 0.4 * iod - up * 0.3 * iod);
+    const Eigen::Vector2d c = mean(eye);
+    pts.push_back(c - up * 0.35 * iod);
+    pts.push_back(c + up * 0.12 * iod);
+    return hull_mask(pts, 1.15);
+  };
+  // iBUG points 37–42 are the subject's right eye, 43–48 the left.
+  out.push_back({"left_eye", eye_region({43, 44, 45, 46, 47, 48}, 46, 43)});
+  out.push_back({"right_eye", eye_region({37, 38, 39, 40, 41, 42}, 37, 40)});
+  // Cheeks: between lower eyelid, nose side, mouth corner and jaw line.
+  auto cheek = [&](std::initializer_list<int> ids) {
+    std::vector<Eigen::Vector2d> pts;
+    for (int i : ids) pts.push_back(p[i]);
+    return hull_mask(pts, 0.95);
+  };
+  out.push_back({"left_cheek", cheek({47, 48, 46, 17, 16, 15, 14, 13, 55, 36, 32})});
+  out.push_back({"right_cheek", cheek({41, 42, 37, 1, 2, 3, 4, 5, 49, 32, 30})});
+  {
+    std::vector<Eigen::Vector2d> pts;
+    for (int i = 28; i <= 36; ++i) pts.push_back(p[i]);
+    out.push_back({"nose", hull_mask(pts, 1.25)});
+  }
+  {
+    std::vector<Eigen::Vector2d> pts;
+    for (int i = 49; i <= 60; ++i) pts.push_back(p[i]);
+    out.push_back({"mouth", hull_mask(pts, 1.2)});
+  }
+  {
+    std::vector<Eigen::Vector2d> pts;
+    for (int i = 6; i <= 12; ++i) pts.push_back(p[i]);
+    for (int i = 56; i <= 60; ++i) pts.push_back(p[i] - up * 0.08 * iod);
+    out.push_back({"chin", hull_mask(pts, 1.0)});
+  }
+  return out;
+}
+
+}  // namespace crease

@@ -1,0 +1,93 @@
+// FaceRig — the blendshape model of the global tracker (paper Sec. 5, the
+// "blendshape prior"; DDE, Cao et al. 2014): a neutral mesh with one UV chart,
+// a linear identity basis and expression blendshapes stored as per-vertex
+// deltas, named expressions, named landmark vertices (the iBUG-68 layout when
+// present) and named region masks in UV.
+//
+//   V(identity α, expression β) = V0 + Σ_k α_k · I_k + Σ_b β_b · B_b      (all #V×3, mm)
+//
+// Expression deltas are relative to the neutral of the mean identity (additive
+// model, as in FaceWarehouse-style and light-stage rigs).
+//
+// File format (.crig, versioned binary; see docs/formats.md):
+//   "CREASRIG" | u32 version | u64 header length | header (JSON, UTF-8) | arrays
+// The header lists names, landmarks, region names, metadata and, for each array,
+// its name, dtype and shape; arrays follow in that order, little-endian.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "core/tri_mesh.h"
+
+namespace crease {
+
+struct RigLandmark {
+  std::string name;  // e.g. "ibug_37"
+  int vertex = -1;   // vertex id in the rig's neutral mesh
+};
+
+struct RegionMask {
+  std::string name;  // e.g. "forehead"
+  cv::Mat mask;      // CV_8U, square, 255 inside the region, 0 outside; texel convention of DESIGN.md
+};
+
+// The region names every rig is expected to provide (training uses forehead, eye
+// and cheek regions, Sec. 4.2).
+const std::vector<std::string>& StandardRegionNames();
+
+struct FaceRig {
+  static constexpr uint32_t kFormatVersion = 1;
+
+  TriMesh neutral;                 // mean identity, neutral expression; UVs required.
+  Eigen::MatrixXf identity_basis;  // (3·#V)×#I deltas (x0, y0, z0, x1, …), mm.
+  Eigen::MatrixXf expression_basis;  // (3·#V)×#E deltas, mm.
+  std::vector<std::string> identity_names;    // #I (e.g. "identity000").
+  std::vector<std::string> expression_names;  // #E (e.g. "browInnerUp_L", ARKit/FACS names).
+  std::vector<RigLandmark> landmarks;
+  std::vector<RegionMask> regions;
+  // Per vertex, the vertex id in the file(s) it was imported from (seam splits map
+  // several vertices to one id); empty for rigs made by crease.
+  std::vector<int> original_vertex;
+  std::string source;  // free text: where the rig came from
+
+  int num_vertices() const { return neutral.num_vertices(); }
+  int num_identity() const { return static_cast<int>(identity_basis.cols()); }
+  int num_expressions() const { return static_cast<int>(expression_basis.cols()); }
+
+  // Positions for identity coefficients α (#I, missing entries = 0 if shorter)
+  // and expression weights β (#E); both may be empty (= zeros). Throws if longer.
+  MatX3d EvaluatePositions(const Eigen::VectorXd& identity, const Eigen::VectorXd& expression) const;
+  // The mesh (neutral's topology, UVs; normals not computed).
+  TriMesh Evaluate(const Eigen::VectorXd& identity, const Eigen::VectorXd& expression) const;
+
+  // -1 when absent.
+  int ExpressionIndex(const std::string& name) const;
+  int LandmarkIndex(const std::string& name) const;
+  const RegionMask* FindRegion(const std::string& name) const;
+  // True when uv lies in the named region (false for unknown regions / outside [0,1]²).
+  bool InRegion(const std::string& name, const Eigen::Vector2d& uv) const;
+
+  // Checks sizes, names (unique, non-empty), landmark ids, masks, finiteness and
+  // the neutral mesh (UVs required). Throws Error starting with `what`.
+  void Validate(const std::string& what) const;
+};
+
+void WriteRig(const std::filesystem::path& path, const FaceRig& rig);
+// Errors name the file: wrong magic ("not a crease rig"), another version, truncated data.
+FaceRig ReadRig(const std::filesystem::path& path);
+
+// Region masks of StandardRegionNames() derived from the 68 iBUG landmarks'
+// positions in UV (the rig must have landmarks "ibug_1" … "ibug_68"): forehead
+// above the brows, glabella between them, each eye with its surroundings (crow's
+// feet and under-eye), cheeks between eye, nose, mouth corner and jaw, nose,
+// mouth, chin. Left/right are the subject's. `size` is the mask resolution.
+std::vector<RegionMask> RegionsFromLandmarks(const FaceRig& rig, int size = 512);
+
+// iBUG-68 landmark names "ibug_1" … "ibug_68" (1-based, as in the iBUG 300-W annotation).
+std::vector<std::string> IbugLandmarkNames();
+
+}  // namespace crease

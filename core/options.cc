@@ -1,0 +1,249 @@
+#include "core/options.h"
+
+#include <cmath>
+#include <limits>
+#include <set>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <yaml-cpp/yaml.h>
+
+#include "core/error.h"
+
+namespace crease {
+namespace internal {
+namespace {
+
+using nlohmann::json;
+
+// Collects the field names, for the unknown-key check and its message.
+class NameCollector final : public OptionVisitor {
+ public:
+  std::vector<std::string> names;
+  void Field(const char* n, bool&) override { names.emplace_back(n); }
+  void Field(const char* n, int&) override { names.emplace_back(n); }
+  void Field(const char* n, int64_t&) override { names.emplace_back(n); }
+  void Field(const char* n, uint64_t&) override { names.emplace_back(n); }
+  void Field(const char* n, float&) override { names.emplace_back(n); }
+  void Field(const char* n, double&) override { names.emplace_back(n); }
+  void Field(const char* n, std::string&) override { names.emplace_back(n); }
+  void Field(const char* n, std::vector<int>&) override { names.emplace_back(n); }
+  void Field(const char* n, std::vector<double>&) override { names.emplace_back(n); }
+  void Field(const char* n, std::vector<std::string>&) override { names.emplace_back(n); }
+};
+
+class JsonReader final : public OptionVisitor {
+ public:
+  JsonReader(const json& j, const std::string& what) : j_(j), what_(what) {}
+
+  void Field(const char* n, bool& v) override {
+    if (const json* x = Find(n)) {
+      Expect(x->is_boolean(), n, "true or false");
+      v = x->get<bool>();
+    }
+  }
+  void Field(const char* n, int& v) override { Integer(n, v); }
+  void Field(const char* n, int64_t& v) override { Integer(n, v); }
+  void Field(const char* n, uint64_t& v) override { Integer(n, v); }
+  void Field(const char* n, float& v) override {
+    if (const json* x = Find(n)) v = static_cast<float>(Number(n, *x));
+  }
+  void Field(const char* n, double& v) override {
+    if (const json* x = Find(n)) v = Number(n, *x);
+  }
+  void Field(const char* n, std::string& v) override {
+    if (const json* x = Find(n)) {
+      Expect(x->is_string(), n, "a string");
+      v = x->get<std::string>();
+    }
+  }
+  void Field(const char* n, std::vector<int>& v) override { List(n, v); }
+  void Field(const char* n, std::vector<double>& v) override { List(n, v); }
+  void Field(const char* n, std::vector<std::string>& v) override { List(n, v); }
+
+ private:
+  const json* Find(const char* n) const {
+    auto it = j_.find(n);
+    return it == j_.end() ? nullptr : &*it;
+  }
+  void Expect(bool ok, const char* n, const char* expected) const {
+    if (!ok) {
+      throw Error(fmt::format("{}: option '{}' must be {}, got {}", what_, n, expected,
+                              j_.at(n).dump()));
+    }
+  }
+  double Number(const char* n, const json& x) const {
+    Expect(x.is_number(), n, "a number");
+    return x.get<double>();
+  }
+  template <class T>
+  void Integer(const char* n, T& v) const {
+    const json* x = Find(n);
+    if (!x) return;
+    Expect(x->is_number_integer() || (x->is_number_float() && std::floor(x->get<double>()) == x->get<double>()),
+           n, "an integer");
+    if (x->is_number_unsigned()) {
+      const uint64_t u = x->get<uint64_t>();
+      Expect(u <= static_cast<uint64_t>(std::numeric_limits<T>::max()), n, "an integer in range");
+      v = static_cast<T>(u);
+    } else {
+      const double d = x->get<double>();
+      Expect(d >= static_cast<double>(std::numeric_limits<T>::lowest()) &&
+                 d <= static_cast<double>(std::numeric_limits<T>::max()),
+             n, "an integer in range");
+      v = x->is_number_integer() ? static_cast<T>(x->get<int64_t>()) : static_cast<T>(d);
+    }
+  }
+  template <class T>
+  void List(const char* n, std::vector<T>& v) const {
+    const json* x = Find(n);
+    if (!x) return;
+    Expect(x->is_array(), n, "a list");
+    std::vector<T> out;
+    for (const json& e : *x) {
+      if constexpr (std::is_same_v<T, std::string>) {
+        Expect(e.is_string(), n, "a list of strings");
+        out.push_back(e.get<std::string>());
+      } else if constexpr (std::is_same_v<T, int>) {
+        Expect(e.is_number_integer(), n, "a list of integers");
+        out.push_back(e.get<int>());
+      } else {
+        Expect(e.is_number(), n, "a list of numbers");
+        out.push_back(e.get<T>());
+      }
+    }
+    v = std::move(out);
+  }
+  const json& j_;
+  const std::string& what_;
+};
+
+class JsonWriter final : public OptionVisitor {
+ public:
+  json j = json::object();
+  void Field(const char* n, bool& v) override { j[n] = v; }
+  void Field(const char* n, int& v) override { j[n] = v; }
+  void Field(const char* n, int64_t& v) override { j[n] = v; }
+  void Field(const char* n, uint64_t& v) override { j[n] = v; }
+  void Field(const char* n, float& v) override { j[n] = v; }
+  void Field(const char* n, double& v) override { j[n] = v; }
+  void Field(const char* n, std::string& v) override { j[n] = v; }
+  void Field(const char* n, std::vector<int>& v) override { j[n] = v; }
+  void Field(const char* n, std::vector<double>& v) override { j[n] = v; }
+  void Field(const char* n, std::vector<std::string>& v) override { j[n] = v; }
+};
+
+void SetFromJson(const json& j, const std::string& what, void* options,
+                 void (*visit)(void*, OptionVisitor&)) {
+  if (!j.is_object()) {
+    throw Error(fmt::format("{}: expected a mapping of option names to values, got {}", what,
+                            j.type_name()));
+  }
+  NameCollector names;
+  visit(options, names);
+  const std::set<std::string> known(names.names.begin(), names.names.end());
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    if (!known.count(it.key())) {
+      std::string list;
+      for (const auto& n : names.names) list += (list.empty() ? "" : ", ") + n;
+      throw Error(fmt::format("{}: unknown option '{}' (known options: {})", what, it.key(), list));
+    }
+  }
+  JsonReader reader(j, what);
+  visit(options, reader);
+}
+
+// YAML scalars carry no type; convert them the way a person reads them.
+json YamlToJson(const YAML::Node& node, const std::string& what) {
+  switch (node.Type()) {
+    case YAML::NodeType::Null:
+    case YAML::NodeType::Undefined:
+      return nullptr;
+    case YAML::NodeType::Scalar: {
+      const std::string s = node.Scalar();
+      if (node.Tag() == "!") return s;  // quoted: always a string
+      if (s == "true" || s == "True" || s == "false" || s == "False") return s[0] == 't' || s[0] == 'T';
+      try {
+        size_t pos = 0;
+        const long long i = std::stoll(s, &pos);
+        if (pos == s.size()) return i;
+      } catch (...) {
+      }
+      try {
+        size_t pos = 0;
+        const double d = std::stod(s, &pos);
+        if (pos == s.size()) return d;
+      } catch (...) {
+      }
+      return s;
+    }
+    case YAML::NodeType::Sequence: {
+      json a = json::array();
+      for (const auto& e : node) a.push_back(YamlToJson(e, what));
+      return a;
+    }
+    case YAML::NodeType::Map: {
+      json o = json::object();
+      for (const auto& kv : node) o[kv.first.as<std::string>()] = YamlToJson(kv.second, what);
+      return o;
+    }
+  }
+  return nullptr;
+}
+
+}  // namespace
+
+void SetFieldsFromJsonText(const std::string& json_text, const std::string& what, void* options,
+                           void (*visit)(void*, OptionVisitor&)) {
+  json j;
+  try {
+    j = json::parse(json_text);
+  } catch (const json::parse_error& e) {
+    throw Error(fmt::format("{}: malformed JSON: {}", what, e.what()));
+  }
+  SetFromJson(j, what, options, visit);
+}
+
+void SetFieldsFromYamlText(const std::string& yaml_text, const std::string& what, void* options,
+                           void (*visit)(void*, OptionVisitor&)) {
+  YAML::Node node;
+  try {
+    node = YAML::Load(yaml_text);
+  } catch (const YAML::Exception& e) {
+    throw Error(fmt::format("{}: malformed YAML: {}", what, e.what()));
+  }
+  json j = YamlToJson(node, what);
+  if (j.is_null()) j = json::object();  // an empty document sets nothing
+  SetFromJson(j, what, options, visit);
+}
+
+std::string FieldsToJsonText(void* options, void (*visit)(void*, OptionVisitor&), int indent) {
+  JsonWriter w;
+  visit(options, w);
+  return w.j.dump(indent);
+}
+
+}  // namespace internal
+
+namespace {
+[[noreturn]] void Fail(const char* owner, const char* field, double value, const char* op,
+                       double bound) {
+  throw Error(fmt::format("{}.{} = {} must be {} {}", owner, field, value, op, bound));
+}
+}  // namespace
+
+void CheckGt(const char* o, const char* f, double v, double b) { if (!(v > b)) Fail(o, f, v, ">", b); }
+void CheckGe(const char* o, const char* f, double v, double b) { if (!(v >= b)) Fail(o, f, v, ">=", b); }
+void CheckLt(const char* o, const char* f, double v, double b) { if (!(v < b)) Fail(o, f, v, "<", b); }
+void CheckLe(const char* o, const char* f, double v, double b) { if (!(v <= b)) Fail(o, f, v, "<=", b); }
+
+void CheckOneOf(const char* owner, const char* field, const std::string& value,
+                const std::vector<std::string>& allowed) {
+  for (const auto& a : allowed) {
+    if (a == value) return;
+  }
+  std::string list;
+  for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+  throw Error(fmt::format("{}.{} = '{}' must be one of: {}", owner, field, value, list));
+}
+
+}  // namespace crease

@@ -1,0 +1,105 @@
+#include "core/camera.h"
+
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+
+namespace crease {
+namespace {
+
+Camera TestCamera() {
+  const CameraIntrinsics k{800.0, 820.0, 319.5, 239.5, 640, 480};
+  const Eigen::Quaterniond q(Eigen::AngleAxisd(0.2, Eigen::Vector3d(0.3, 1.0, -0.2).normalized()));
+  return Camera(k, Rigid3d(q, Eigen::Vector3d(10.0, -5.0, 600.0)));
+}
+
+TEST(Camera, ProjectsLikeThePinholeFormula) {
+  Camera cam(CameraIntrinsics{500, 500, 320, 240, 640, 480}, Rigid3d());
+  const Eigen::Vector2d p = cam.Project(Eigen::Vector3d(10, -20, 100));
+  EXPECT_DOUBLE_EQ(p.x(), 320 + 500 * 0.1);
+  EXPECT_DOUBLE_EQ(p.y(), 240 - 500 * 0.2);
+  EXPECT_TRUE(std::isnan(cam.Project(Eigen::Vector3d(0, 0, -5)).x()));
+  EXPECT_FALSE(cam.ProjectWithJacobians(Eigen::Vector3d(0, 0, -5), nullptr, nullptr, nullptr));
+}
+
+TEST(Camera, JacobiansMatchFiniteDifferences) {
+  const Camera cam = TestCamera();
+  const Eigen::Vector3d X(12.0, 30.0, -15.0);
+  Eigen::Vector2d px;
+  Eigen::Matrix<double, 2, 3> Jp;
+  Eigen::Matrix<double, 2, 6> Jpose;
+  ASSERT_TRUE(cam.ProjectWithJacobians(X, &px, &Jp, &Jpose));
+  EXPECT_LT((px - cam.Project(X)).norm(), 1e-12);
+  const double h = 1e-6;
+  for (int k = 0; k < 3; ++k) {
+    Eigen::Vector3d d = Eigen::Vector3d::Zero();
+    d[k] = h;
+    const Eigen::Vector2d num = (cam.Project(X + d) - cam.Project(X - d)) / (2 * h);
+    EXPECT_LT((num - Jp.col(k)).norm(), 1e-5 * (1 + Jp.col(k).norm())) << "point axis " << k;
+  }
+  for (int k = 0; k < 6; ++k) {
+    auto perturbed = [&](double s) {
+      Eigen::Vector3d w = Eigen::Vector3d::Zero(), tau = Eigen::Vector3d::Zero();
+      (k < 3 ? w[k] : tau[k - 3]) = s;
+      const Eigen::Quaterniond dq(Eigen::AngleAxisd(w.norm(), w.norm() > 0 ? w.normalized() : Eigen::Vector3d::UnitX()));
+      Camera c = cam;
+      c.cam_from_head = Rigid3d(dq, tau) * cam.cam_from_head;
+      return c.Project(X);
+    };
+    const Eigen::Vector2d num = (perturbed(h) - perturbed(-h)) / (2 * h);
+    EXPECT_LT((num - Jpose.col(k)).norm(), 1e-4 * (1 + Jpose.col(k).norm())) << "pose axis " << k;
+  }
+}
+
+TEST(Camera, RigidTransformsCompose) {
+  const Rigid3d a = TestCamera().cam_from_head;
+  const Rigid3d id = a * a.Inverse();
+  EXPECT_LT((id * Eigen::Vector3d(1, 2, 3) - Eigen::Vector3d(1, 2, 3)).norm(), 1e-12);
+}
+
+TEST(Camera, PixelRayHitsTheProjectedPoint) {
+  const Camera cam = TestCamera();
+  const Eigen::Vector3d X(5.0, 7.0, 20.0);
+  const Eigen::Vector2d p = cam.Project(X);
+  const Eigen::Vector3d dir = cam.PixelRayInHead(p.x(), p.y());
+  const Eigen::Vector3d c = cam.CentreInHead();
+  EXPECT_LT(((X - c).normalized() - dir).norm(), 1e-12);
+}
+
+TEST(Camera, LookAtCentresTheTarget) {
+  const Camera cam = LookAtCamera(CameraIntrinsics::FromFov(40, 640, 480), Eigen::Vector3d(0, 0, 500),
+                                  Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitY());
+  const Eigen::Vector2d c = cam.Project(Eigen::Vector3d::Zero());
+  EXPECT_NEAR(c.x(), 319.5, 1e-9);
+  EXPECT_NEAR(c.y(), 239.5, 1e-9);
+  // Head +y (up) appears upwards in the image (smaller row).
+  EXPECT_LT(cam.Project(Eigen::Vector3d(0, 10, 0)).y(), c.y());
+  // Head +x appears to the right.
+  EXPECT_GT(cam.Project(Eigen::Vector3d(10, 0, 0)).x(), c.x());
+}
+
+TEST(Camera, JsonRoundTripAndErrors) {
+  const Camera cam = TestCamera();
+  const Camera back = CameraFromJson(CameraToJson(cam), "cam.json");
+  EXPECT_EQ(back.intrinsics.fx, cam.intrinsics.fx);
+  EXPECT_EQ(back.intrinsics.height, cam.intrinsics.height);
+  EXPECT_LT((back.cam_from_head.translation - cam.cam_from_head.translation).norm(), 1e-12);
+  EXPECT_LT(back.cam_from_head.rotation.angularDistance(cam.cam_from_head.rotation), 1e-12);
+
+  nlohmann::json j = CameraToJson(cam);
+  j.erase("fy");
+  try {
+    CameraFromJson(j, "cam.json");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("cam.json: camera field 'fy' is missing"), std::string::npos);
+  }
+  j = CameraToJson(cam);
+  j["fx"] = -3;
+  EXPECT_THROW(CameraFromJson(j, "cam.json"), Error);
+}
+
+}  // namespace
+}  // namespace crease

@@ -1,0 +1,195 @@
+#include "core/face_rig.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <opencv2/core.hpp>
+
+#include "core/error.h"
+#include "core/mesh_primitives.h"
+#include "core/rig_import.h"
+
+namespace crease {
+namespace {
+namespace fs = std::filesystem;
+
+const fs::path kSampleRig = fs::path(CREASE_DATA_DIR) / "sample_rig";
+
+FaceRig SmallRig() {
+  FaceRig rig;
+  rig.neutral = MakeGrid(3, 2, 30.0, 20.0);
+  rig.neutral.N.resize(0, 3);
+  const int n = 3 * rig.neutral.num_vertices();
+  rig.identity_basis = Eigen::MatrixXf::Random(n, 2);
+  rig.expression_basis = Eigen::MatrixXf::Random(n, 3);
+  rig.identity_names = {"width", "length"};
+  rig.expression_names = {"jawOpen", "eyeBlink_L", "eyeBlink_R"};
+  rig.landmarks = {{"nose_tip", 5}, {"chin", 1}};
+  cv::Mat m = cv::Mat::zeros(32, 32, CV_8UC1);
+  m(cv::Rect(0, 0, 16, 8)) = 255;
+  rig.regions = {{"forehead", m}};
+  return rig;
+}
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(FaceRig, EvaluateIsTheLinearBlendshapeModel) {
+  const FaceRig rig = SmallRig();
+  Eigen::VectorXd a(2), b(3);
+  a << 0.5, -1.0;
+  b << 1.0, 0.0, 0.25;
+  const MatX3d V = rig.EvaluatePositions(a, b);
+  for (int v = 0; v < rig.num_vertices(); ++v) {
+    for (int k = 0; k < 3; ++k) {
+      double expect = rig.neutral.V(v, k);
+      for (int i = 0; i < 2; ++i) expect += a[i] * rig.identity_basis(3 * v + k, i);
+      for (int e = 0; e < 3; ++e) expect += b[e] * rig.expression_basis(3 * v + k, e);
+      EXPECT_NEAR(V(v, k), expect, 1e-6);
+    }
+  }
+  // Shorter coefficient vectors mean zeros for the rest; empty gives the neutral.
+  EXPECT_EQ(rig.EvaluatePositions({}, {}), rig.neutral.V);
+  EXPECT_NE(ErrorOf([&] { rig.EvaluatePositions(Eigen::VectorXd::Zero(3), {}); }).find("3 identity coefficients"),
+            std::string::npos);
+  EXPECT_EQ(rig.ExpressionIndex("eyeBlink_R"), 2);
+  EXPECT_EQ(rig.ExpressionIndex("nope"), -1);
+  EXPECT_TRUE(rig.InRegion("forehead", {0.1, 0.1}));
+  EXPECT_FALSE(rig.InRegion("forehead", {0.9, 0.9}));
+  EXPECT_FALSE(rig.InRegion("chin", {0.1, 0.1}));
+}
+
+TEST(FaceRig, FileRoundTripIsExact) {
+  const FaceRig rig = SmallRig();
+  const fs::path p = fs::path(::testing::TempDir()) / "small.crig";
+  WriteRig(p, rig);
+  const FaceRig back = ReadRig(p);
+  EXPECT_EQ(back.neutral.V, rig.neutral.V);
+  EXPECT_EQ(back.neutral.F, rig.neutral.F);
+  EXPECT_EQ(back.neutral.UV, rig.neutral.UV);
+  EXPECT_EQ(back.identity_basis, rig.identity_basis);
+  EXPECT_EQ(back.expression_basis, rig.expression_basis);
+  EXPECT_EQ(back.expression_names, rig.expression_names);
+  ASSERT_EQ(back.landmarks.size(), 2u);
+  EXPECT_EQ(back.landmarks[0].vertex, 5);
+  ASSERT_EQ(back.regions.size(), 1u);
+  EXPECT_EQ(cv::norm(back.regions[0].mask, rig.regions[0].mask, cv::NORM_INF), 0.0);
+}
+
+TEST(FaceRig, MalformedFilesGiveNamedErrors) {
+  const fs::path dir = fs::path(::testing::TempDir());
+  const fs::path good = dir / "good.crig";
+  WriteRig(good, SmallRig());
+  std::string bytes;
+  {
+    std::ifstream in(good, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const fs::path truncated = dir / "truncated.crig";
+  std::ofstream(truncated, std::ios::binary) << bytes.substr(0, bytes.size() - 10);
+  EXPECT_NE(ErrorOf([&] { ReadRig(truncated); }).find("truncated.crig: truncated rig file"), std::string::npos);
+  const fs::path magic = dir / "magic.crig";
+  std::ofstream(magic, std::ios::binary) << "PLY nonsense";
+  EXPECT_NE(ErrorOf([&] { ReadRig(magic); }).find("not a crease rig"), std::string::npos);
+  std::string v2 = bytes;
+  v2[8] = 2;
+  const fs::path version = dir / "version.crig";
+  std::ofstream(version, std::ios::binary) << v2;
+  EXPECT_NE(ErrorOf([&] { ReadRig(version); }).find("version 2 is not supported"), std::string::npos);
+  EXPECT_NE(ErrorOf([&] { ReadRig(dir / "absent.crig"); }).find("file does not exist"), std::string::npos);
+
+  FaceRig bad = SmallRig();
+  bad.landmarks.push_back({"oops", 1000});
+  EXPECT_NE(ErrorOf([&] { WriteRig(dir / "bad.crig", bad); }).find("landmark 'oops' references vertex 1000"),
+            std::string::npos);
+  EXPECT_FALSE(fs::exists(dir / "bad.crig"));
+  bad = SmallRig();
+  bad.expression_names[1] = "jawOpen";
+  EXPECT_NE(ErrorOf([&] { bad.Validate("r"); }).find("expression name 'jawOpen' appears twice"), std::string::npos);
+  bad = SmallRig();
+  bad.neutral.UV.resize(0, 2);
+  EXPECT_NE(ErrorOf([&] { bad.Validate("r"); }).find("no UV coordinates"), std::string::npos);
+}
+
+TEST(RigImport, SampleObjFolder) {
+  RigImportOptions opt;
+  opt.units_to_mm = UnitsToMm("cm");
+  RigImportReport report;
+  const FaceRig rig = ImportObjRig(kSampleRig, opt, &report);
+  // 41 × 53 grid positions; the centre column (53 vertices) carries two UVs.
+  EXPECT_EQ(report.original_vertices, 41 * 53);
+  EXPECT_EQ(report.split_vertices, 53);
+  EXPECT_EQ(rig.num_vertices(), 41 * 53 + 53);
+  EXPECT_EQ(rig.neutral.num_faces(), 2 * 40 * 52);  // quads triangulated
+  EXPECT_EQ(rig.num_identity(), 4);
+  EXPECT_EQ(rig.num_expressions(), 7);
+  EXPECT_EQ(rig.expression_names.front(), "browDown");  // sorted by name
+  EXPECT_EQ(rig.landmarks.size(), 68u);
+  EXPECT_EQ(rig.regions.size(), StandardRegionNames().size());
+  // Centimetres became millimetres: the mask is 15 cm wide.
+  const auto [lo, hi] = BoundingBox(rig.neutral);
+  EXPECT_NEAR(hi.x() - lo.x(), 150.0, 1e-3);
+  // UVs were flipped to crease's v-down convention: the forehead (head +y) has small v.
+  const int top = rig.landmarks[rig.LandmarkIndex("ibug_20")].vertex;
+  const int chin = rig.landmarks[rig.LandmarkIndex("ibug_9")].vertex;
+  EXPECT_LT(rig.neutral.UV(top, 1), rig.neutral.UV(chin, 1));
+  // jawOpen moves the chin down (−y) and leaves the forehead alone.
+  const int jaw = rig.ExpressionIndex("jawOpen");
+  EXPECT_LT(rig.expression_basis(3 * chin + 1, jaw), -5.0);
+  EXPECT_NEAR(rig.expression_basis(3 * top + 1, jaw), 0.0, 1e-3);
+  // Every seam-split vertex maps back to one OBJ id and sits where its twin does.
+  std::map<int, int> first;
+  for (int v = 0; v < rig.num_vertices(); ++v) {
+    auto [it, inserted] = first.emplace(rig.original_vertex[v], v);
+    if (!inserted) EXPECT_EQ(rig.neutral.V.row(v), rig.neutral.V.row(it->second));
+  }
+  // Regions are non-empty and where they belong.
+  for (const auto& r : rig.regions) EXPECT_GT(cv::countNonZero(r.mask), 100) << r.name;
+  const Eigen::Vector2d forehead_uv = rig.neutral.UV.row(top).transpose() + Eigen::Vector2d(0, -0.06);
+  EXPECT_TRUE(rig.InRegion("forehead", forehead_uv));
+  EXPECT_FALSE(rig.InRegion("chin", forehead_uv));
+}
+
+TEST(RigImport, FaceRangeCropsAndErrorsNameTheFile) {
+  const fs::path dir = fs::path(::testing::TempDir()) / "crease_rig_import";
+  fs::remove_all(dir);
+  fs::copy(kSampleRig, dir, fs::copy_options::recursive);
+  RigImportOptions opt;
+  opt.face_last = 41 * 27;  // the upper 27 rows of vertices
+  // Landmarks below the face region are an error naming landmarks.json.
+  EXPECT_NE(ErrorOf([&] { ImportObjRig(dir, opt); }).find("landmarks.json: landmark"), std::string::npos);
+  fs::remove(dir / "landmarks.json");
+  RigImportReport report;
+  const FaceRig rig = ImportObjRig(dir, opt, &report);
+  EXPECT_EQ(rig.neutral.num_faces(), 2 * 40 * 26);
+  EXPECT_EQ(report.dropped_triangles, 2 * 40 * 26);
+  for (int id : rig.original_vertex) EXPECT_LT(id, 41 * 27);
+  EXPECT_TRUE(rig.landmarks.empty());
+  EXPECT_TRUE(rig.regions.empty());
+  EXPECT_EQ(report.warnings.size(), 2u);
+
+  // A shape with another topology is named.
+  {
+    std::ofstream out(dir / "expressions" / "jawOpen.obj", std::ios::app);
+    out << "f 1/1 2/2 3/3\n";
+  }
+  EXPECT_NE(ErrorOf([&] { ImportObjRig(dir, opt); }).find("jawOpen.obj: topology differs"), std::string::npos);
+  fs::remove(dir / "neutral.obj");
+  EXPECT_NE(ErrorOf([&] { ImportObjRig(dir, opt); }).find("no neutral shape found"), std::string::npos);
+  EXPECT_NE(ErrorOf([&] { ImportObjRig(dir / "nothing", opt); }).find("not a folder"), std::string::npos);
+  opt.face_last = 999999;
+  fs::copy_file(kSampleRig / "neutral.obj", dir / "neutral.obj");
+  EXPECT_NE(ErrorOf([&] { ImportObjRig(dir, opt); }).find("exceeds"), std::string::npos);
+  EXPECT_THROW(UnitsToMm("inch"), Error);
+}
+
+}  // namespace
+}  // namespace crease

@@ -1,0 +1,79 @@
+#include "core/image_io.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <opencv2/core.hpp>
+
+#include "core/error.h"
+#include "core/rng.h"
+
+namespace crease {
+namespace {
+namespace fs = std::filesystem;
+
+cv::Mat RandomImage(int h, int w, int c, uint64_t seed) {
+  cv::Mat m(h, w, CV_32FC(c));
+  Rng rng(seed);
+  for (int y = 0; y < h; ++y) {
+    float* row = m.ptr<float>(y);
+    for (int x = 0; x < w * c; ++x) row[x] = static_cast<float>(rng.Uniform(-2.0, 3.0));
+  }
+  return m;
+}
+
+// All image tests in one process: OpenImageIO costs ~0.35 s per process start.
+TEST(ImageIo, ExrPngRoundTripsSrgbAndErrors) {
+  const fs::path dir = fs::path(::testing::TempDir()) / "crease_image_io";
+  // EXR float: bit-exact, 1 and 3 channels.
+  for (int c : {1, 3, 4}) {
+    const cv::Mat img = RandomImage(17, 23, c, c);
+    const fs::path p = dir / ("img" + std::to_string(c) + ".exr");
+    WriteImage(p, img);
+    const cv::Mat back = ReadImage(p);
+    ASSERT_EQ(back.type(), img.type());
+    EXPECT_EQ(cv::norm(img, back, cv::NORM_INF), 0.0) << c << " channels";
+  }
+  // PNG 8-bit sRGB: every 8-bit code survives linear→sRGB→linear→sRGB.
+  cv::Mat codes(1, 256, CV_32FC1);
+  for (int i = 0; i < 256; ++i) codes.at<float>(0, i) = SrgbToLinear(i / 255.0f);
+  WriteImage(dir / "codes.png", codes);
+  const cv::Mat back = ReadImage(dir / "codes.png");
+  for (int i = 0; i < 256; ++i) {
+    EXPECT_EQ(cvRound(LinearToSrgb(back.at<float>(0, i)) * 255.0f), i);
+  }
+  // Linear (data) PNG keeps value·255.
+  cv::Mat mask(4, 4, CV_32FC1, cv::Scalar(0.0f));
+  mask.at<float>(1, 2) = 1.0f;
+  WriteImage(dir / "mask.png", mask, {.srgb = false});
+  const cv::Mat mback = ReadImage(dir / "mask.png", /*srgb=*/false);
+  EXPECT_EQ(mback.at<float>(1, 2), 1.0f);
+  EXPECT_EQ(mback.at<float>(0, 0), 0.0f);
+
+  // Errors name the file.
+  try {
+    ReadImage(dir / "missing.exr");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("missing.exr: file does not exist"), std::string::npos);
+  }
+  std::ofstream(dir / "garbage.png") << "this is not a png";
+  EXPECT_THROW(ReadImage(dir / "garbage.png"), Error);
+  cv::Mat nan_img(2, 2, CV_32FC1, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+  try {
+    WriteImage(dir / "nan.png", nan_img);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("nan.png"), std::string::npos);
+  }
+  EXPECT_FALSE(fs::exists(dir / "nan.png"));
+  EXPECT_THROW(WriteImage(dir / "x.unknownext", codes), Error);
+  // No temporary files are left behind.
+  for (const auto& e : fs::directory_iterator(dir)) {
+    EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
+  }
+}
+
+}  // namespace
+}  // namespace crease

@@ -1,0 +1,51 @@
+#include "core/json_io.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/rng.h"
+
+namespace crease {
+namespace {
+namespace fs = std::filesystem;
+
+TEST(JsonIo, RoundTripIsExactForDoubles) {
+  const fs::path p = fs::path(::testing::TempDir()) / "crease_json_rt.json";
+  Rng rng(5);
+  nlohmann::json j;
+  std::vector<double> values;
+  for (int i = 0; i < 1000; ++i) values.push_back(rng.Normal() * std::pow(10.0, rng.UniformInt(-30, 30)));
+  values.push_back(std::numeric_limits<double>::denorm_min());
+  values.push_back(0.1);
+  j["values"] = values;
+  j["name"] = "ünïcode";
+  WriteJsonFile(p, j);
+  const nlohmann::json back = ReadJsonFile(p);
+  EXPECT_EQ(back["values"].get<std::vector<double>>(), values);
+  EXPECT_EQ(back["name"], "ünïcode");
+}
+
+TEST(JsonIo, MalformedFileNamesLineAndColumn) {
+  const fs::path p = fs::path(::testing::TempDir()) / "crease_json_bad.json";
+  std::ofstream(p) << "{\n  \"a\": 1,\n  \"b\": ]\n}\n";
+  try {
+    ReadJsonFile(p);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find(p.string() + ":3:"), std::string::npos) << e.what();
+  }
+  try {
+    ReadJsonFile(fs::path(::testing::TempDir()) / "does_not_exist.json");
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("file does not exist"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace crease

@@ -1,0 +1,110 @@
+#include "core/options.h"
+
+#include <gtest/gtest.h>
+
+#include "core/error.h"
+
+namespace crease {
+namespace {
+
+// An Options struct written the way every stage writes one.
+struct ExampleOptions {
+  int num_ferns = 1280;      // K, Sec. 4.3
+  double beta = 1000.0;      // shrinkage, Eq. 4
+  float alpha = 0.005f;      // wrinkle threshold, Sec. 4.2
+  bool parallel = true;
+  std::string solver = "ldlt";
+  std::vector<int> kernels = {6, 8};
+  std::vector<double> weights;
+  std::vector<std::string> regions = {"forehead"};
+  uint64_t seed = 7;
+
+  void VisitFields(OptionVisitor& v) {
+    v.Field("num_ferns", num_ferns);
+    v.Field("beta", beta);
+    v.Field("alpha", alpha);
+    v.Field("parallel", parallel);
+    v.Field("solver", solver);
+    v.Field("kernels", kernels);
+    v.Field("weights", weights);
+    v.Field("regions", regions);
+    v.Field("seed", seed);
+  }
+  void Check() const {
+    CheckGt("ExampleOptions", "num_ferns", num_ferns, 0);
+    CheckGe("ExampleOptions", "beta", beta, 0.0);
+    CheckOneOf("ExampleOptions", "solver", solver, {"ldlt", "cholmod"});
+  }
+};
+
+std::string ErrorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(Options, JsonSetsFieldsByName) {
+  ExampleOptions o;
+  SetOptionsFromJson(R"({"num_ferns": 80, "beta": 0, "solver": "cholmod", "kernels": [3, 9],
+                         "regions": ["a", "b"], "seed": 18446744073709551615, "alpha": 0.01})",
+                     "test.json", &o);
+  EXPECT_EQ(o.num_ferns, 80);
+  EXPECT_EQ(o.beta, 0.0);
+  EXPECT_EQ(o.solver, "cholmod");
+  EXPECT_EQ(o.kernels, (std::vector<int>{3, 9}));
+  EXPECT_EQ(o.regions, (std::vector<std::string>{"a", "b"}));
+  EXPECT_EQ(o.seed, 18446744073709551615ULL);
+  EXPECT_FLOAT_EQ(o.alpha, 0.01f);
+  EXPECT_TRUE(o.parallel);  // untouched
+}
+
+TEST(Options, YamlSetsFieldsByName) {
+  ExampleOptions o;
+  SetOptionsFromYaml("num_ferns: 640\nparallel: false\nweights: [0.5, 1]\nsolver: \"ldlt\"\n", "cfg.yaml", &o);
+  EXPECT_EQ(o.num_ferns, 640);
+  EXPECT_FALSE(o.parallel);
+  EXPECT_EQ(o.weights, (std::vector<double>{0.5, 1.0}));
+  SetOptionsFromYaml("", "empty.yaml", &o);  // an empty document changes nothing
+  EXPECT_EQ(o.num_ferns, 640);
+}
+
+TEST(Options, UnknownKeysAndWrongTypesAreRejectedByName) {
+  ExampleOptions o;
+  std::string e = ErrorOf([&] { SetOptionsFromJson(R"({"num_fern": 3})", "exp.json", &o); });
+  EXPECT_NE(e.find("exp.json: unknown option 'num_fern'"), std::string::npos) << e;
+  EXPECT_NE(e.find("num_ferns"), std::string::npos) << e;  // lists the known ones
+  e = ErrorOf([&] { SetOptionsFromYaml("beta: lots\n", "exp.yaml", &o); });
+  EXPECT_NE(e.find("option 'beta' must be a number"), std::string::npos) << e;
+  e = ErrorOf([&] { SetOptionsFromJson(R"({"num_ferns": 2.5})", "x", &o); });
+  EXPECT_NE(e.find("'num_ferns' must be an integer"), std::string::npos) << e;
+  e = ErrorOf([&] { SetOptionsFromJson(R"({"num_ferns": 1e12})", "x", &o); });
+  EXPECT_NE(e.find("in range"), std::string::npos) << e;
+  e = ErrorOf([&] { SetOptionsFromJson(R"([1, 2])", "x", &o); });
+  EXPECT_NE(e.find("expected a mapping"), std::string::npos) << e;
+  e = ErrorOf([&] { SetOptionsFromJson(R"({"num_ferns": )", "bad.json", &o); });
+  EXPECT_NE(e.find("bad.json: malformed JSON"), std::string::npos) << e;
+}
+
+TEST(Options, CheckIsCalledAndNamesTheField) {
+  ExampleOptions o;
+  std::string e = ErrorOf([&] { SetOptionsFromJson(R"({"num_ferns": 0})", "x", &o); });
+  EXPECT_EQ(e, "ExampleOptions.num_ferns = 0 must be > 0");
+  e = ErrorOf([&] { SetOptionsFromJson(R"({"solver": "qr"})", "x", &o); });
+  EXPECT_EQ(e, "ExampleOptions.solver = 'qr' must be one of: ldlt, cholmod");
+}
+
+TEST(Options, ToJsonRoundTrips) {
+  ExampleOptions a;
+  a.num_ferns = 5;
+  a.weights = {0.1, 0.2};
+  ExampleOptions b;
+  SetOptionsFromJson(OptionsToJson(a), "roundtrip", &b);
+  EXPECT_EQ(OptionsToJson(a), OptionsToJson(b));
+  EXPECT_EQ(b.weights, a.weights);
+}
+
+}  // namespace
+}  // namespace crease
