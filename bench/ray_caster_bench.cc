@@ -109,7 +109,7 @@ const SignedQueries& Signed() {
     }
     return s;
   }();
-  return s;
+  return q;
 }
 
 void BM_PrimaryRays(benchmark::State& state) {

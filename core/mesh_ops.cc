@@ -154,7 +154,8 @@ SpMat CotangentLaplacian(const TriMesh& mesh) {
   RequireFaceIndices(mesh, "CotangentLaplacian");
   const int nv = mesh.num_vertices();
   std::vector<Triplet> t;
-  t.reserve(static_cast<size_t>(mesh.num_faces()) * 12);
+  t.reserve(static_cast<size_t>(mesh.num_faces()) * 6 + nv);
+  Eigen::VectorXd diagonal = Eigen::VectorXd::Zero(nv);
   for (int f = 0; f < mesh.num_faces(); ++f) {
     const Eigen::Vector3d p[3] = {Corner(mesh, f, 0), Corner(mesh, f, 1), Corner(mesh, f, 2)};
     const double double_area = (p[1] - p[0]).cross(p[2] - p[0]).norm();
@@ -167,10 +168,11 @@ SpMat CotangentLaplacian(const TriMesh& mesh) {
       const int vi = mesh.F(f, i), vj = mesh.F(f, j);
       t.emplace_back(vi, vj, -w);
       t.emplace_back(vj, vi, -w);
-      t.emplace_back(vi, vi, w);
-      t.emplace_back(vj, vj, w);
+      diagonal[vi] += w;
+      diagonal[vj] += w;
     }
   }
+  for (int i = 0; i < nv; ++i) t.emplace_back(i, i, diagonal[i]);
   SpMat L(nv, nv);
   L.setFromTriplets(t.begin(), t.end());
   return L;
@@ -287,7 +289,7 @@ Eigen::VectorXd MeshLowpass::Apply(const Eigen::VectorXd& x) const {
   if (!impl_) return x;
   Eigen::VectorXd cur = x;
   for (int s = 0; s < options_.steps; ++s) {
-    // Eq. (backward Euler): (M + τL) x_{k+1} = M x_k, fixed vertices held.
+    // One backward-Euler step (M + τL) x_{k+1} = M x_k of G (Sec. 4.1), fixed vertices held.
     Eigen::VectorXd rhs = impl_->mass.cwiseProduct(cur) - impl_->coupling * x;
     for (int i = 0; i < num_vertices_; ++i) {
       if (impl_->fixed[i]) rhs[i] = x[i];

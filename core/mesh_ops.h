@@ -74,9 +74,9 @@ SpMat MassMatrix(const TriMesh& mesh, MassMatrixType type = MassMatrixType::kBar
 // wavelength λ½ = 2πσ / √(2 ln 2) ≈ 5.34 σ.
 //  * G: σ = 3 mm, λ½ ≈ 16 mm. The coarse tracking mesh resolves only shapes
 //    longer than ~10–15 mm; forehead furrows (spacing ~10 mm) pass G's complement
-//    at ~83 %, crow's feet (3–5 mm) essentially fully.
+//    (the medium band) at ~80 %, crow's feet (3–5 mm) essentially fully.
 //  * G^HF: σ = 0.3 mm, λ½ ≈ 1.6 mm. Pores (0.1–0.5 mm) are removed (a 0.5 mm
-//    wavelength keeps < 0.1 %), 3 mm wrinkles keep ~82 %.
+//    wavelength keeps < 1 % with 8 steps), 3 mm wrinkles keep ~82 %.
 inline constexpr double kGaussianBandwidthMm = 3.0;               // G, Sec. 4.1
 inline constexpr double kHighFrequencyGaussianBandwidthMm = 0.3;  // G^HF, Sec. 4.1
 
@@ -94,7 +94,8 @@ struct LowpassOptions {
   std::string mass_matrix = "voronoi";
   // Boundary condition: "natural" (Neumann, zero normal flux: no heat leaves
   // the surface, constants are kept, a linear function bends near the boundary so
-  // boundary vertices of a smoothed open mesh move inwards along the surface) or
+  // boundary vertices of a smoothed open mesh slide inwards along the surface, by
+  // ~1.1 σ on a flat grid, decaying to < 1e-5 mm at 6 σ from the boundary) or
   // "fixed" (Dirichlet: boundary vertices keep their input values; a planar mesh
   // is then reproduced exactly, but detail at the boundary is not filtered).
   std::string boundary = "natural";

@@ -51,15 +51,13 @@ int64_t TopLeftBias(int64_t ax, int64_t ay, int64_t bx, int64_t by) {
   return owns ? 0 : -1;
 }
 
-TriangleSetup SetUp(const TriMesh& mesh, int f, int width, int height) {
+// `sx`, `sy`: the snapped UVs of all vertices (texel units × kStep).
+TriangleSetup SetUp(const TriMesh& mesh, const std::vector<int64_t>& sx, const std::vector<int64_t>& sy, int f,
+                    int width, int height) {
   TriangleSetup s;
   const int v0 = mesh.F(f, 0), v1 = mesh.F(f, 1), v2 = mesh.F(f, 2);
-  int64_t x[3], y[3];
-  const int ids[3] = {v0, v1, v2};
-  for (int k = 0; k < 3; ++k) {
-    x[k] = Snap(mesh.UV(ids[k], 0) * width);
-    y[k] = Snap(mesh.UV(ids[k], 1) * height);
-  }
+  int64_t x[3] = {sx[static_cast<size_t>(v0)], sx[static_cast<size_t>(v1)], sx[static_cast<size_t>(v2)]};
+  int64_t y[3] = {sy[static_cast<size_t>(v0)], sy[static_cast<size_t>(v1)], sy[static_cast<size_t>(v2)]};
   // Twice the signed area in fixed point; edge function E_ab(p) = (b−a)×(p−a).
   const int64_t area = (x[1] - x[0]) * (y[2] - y[0]) - (y[1] - y[0]) * (x[2] - x[0]);
   if (area == 0) return s;
@@ -92,10 +90,11 @@ TriangleSetup SetUp(const TriMesh& mesh, int f, int width, int height) {
   s.j1 = static_cast<int>(j1);
   s.au = au;
   s.av = av;
-  s.m00 = e2v / det;
-  s.m01 = -e2u / det;
-  s.m10 = -e1v / det;
-  s.m11 = e1u / det;
+  const double inv_det = 1.0 / det;
+  s.m00 = e2v * inv_det;
+  s.m01 = -e2u * inv_det;
+  s.m10 = -e1v * inv_det;
+  s.m11 = e1u * inv_det;
   return s;
 }
 
@@ -117,19 +116,45 @@ UvRaster RasterizeUv(const TriMesh& mesh, int width, int height, const std::stri
     }
   }
 
-  const int num_faces = mesh.num_faces();
-  std::vector<TriangleSetup> setup(static_cast<size_t>(num_faces));
-  tbb::parallel_for(tbb::blocked_range<int>(0, num_faces, 2048), [&](const tbb::blocked_range<int>& r) {
-    for (int f = r.begin(); f != r.end(); ++f) setup[static_cast<size_t>(f)] = SetUp(mesh, f, width, height);
+  // Snap every vertex once.
+  const int num_vertices = mesh.num_vertices(), num_faces = mesh.num_faces();
+  std::vector<int64_t> sx(static_cast<size_t>(num_vertices)), sy(static_cast<size_t>(num_vertices));
+  tbb::parallel_for(tbb::blocked_range<int>(0, num_vertices, 4096), [&](const tbb::blocked_range<int>& r) {
+    for (int v = r.begin(); v != r.end(); ++v) {
+      sx[static_cast<size_t>(v)] = Snap(mesh.UV(v, 0) * width);
+      sy[static_cast<size_t>(v)] = Snap(mesh.UV(v, 1) * height);
+    }
   });
 
-  // Bin triangles into bands of rows, in index order (so each list is sorted).
+  // Bin triangles into bands of rows by the rows their centres can touch, in index
+  // order (so each band's list is sorted): counts, offsets, then the lists (CSR).
   const int num_bands = (height + kBandRows - 1) / kBandRows;
-  std::vector<std::vector<int>> band_triangles(static_cast<size_t>(num_bands));
+  std::vector<int> band_lo(static_cast<size_t>(num_faces)), band_hi(static_cast<size_t>(num_faces));
+  tbb::parallel_for(tbb::blocked_range<int>(0, num_faces, 4096), [&](const tbb::blocked_range<int>& r) {
+    for (int f = r.begin(); f != r.end(); ++f) {
+      const int64_t y0 = sy[static_cast<size_t>(mesh.F(f, 0))], y1 = sy[static_cast<size_t>(mesh.F(f, 1))],
+                    y2 = sy[static_cast<size_t>(mesh.F(f, 2))];
+      const int64_t j0 = std::max<int64_t>(0, FirstCentreAtOrAbove(std::min({y0, y1, y2})));
+      const int64_t j1 = std::min<int64_t>(height - 1, LastCentreAtOrBelow(std::max({y0, y1, y2})));
+      band_lo[static_cast<size_t>(f)] = j0 <= j1 ? static_cast<int>(j0 / kBandRows) : 0;
+      band_hi[static_cast<size_t>(f)] = j0 <= j1 ? static_cast<int>(j1 / kBandRows) : -1;
+    }
+  });
+  std::vector<size_t> band_offset(static_cast<size_t>(num_bands) + 1, 0);
   for (int f = 0; f < num_faces; ++f) {
-    const TriangleSetup& s = setup[static_cast<size_t>(f)];
-    if (!s.active) continue;
-    for (int b = s.j0 / kBandRows; b <= s.j1 / kBandRows; ++b) band_triangles[static_cast<size_t>(b)].push_back(f);
+    for (int b = band_lo[static_cast<size_t>(f)]; b <= band_hi[static_cast<size_t>(f)]; ++b) {
+      ++band_offset[static_cast<size_t>(b) + 1];
+    }
+  }
+  for (int b = 0; b < num_bands; ++b) band_offset[static_cast<size_t>(b) + 1] += band_offset[static_cast<size_t>(b)];
+  std::vector<int> band_triangles(band_offset.back());
+  {
+    std::vector<size_t> cursor(band_offset.begin(), band_offset.end() - 1);
+    for (int f = 0; f < num_faces; ++f) {
+      for (int b = band_lo[static_cast<size_t>(f)]; b <= band_hi[static_cast<size_t>(f)]; ++b) {
+        band_triangles[cursor[static_cast<size_t>(b)]++] = f;
+      }
+    }
   }
 
   UvRaster raster;
@@ -137,16 +162,25 @@ UvRaster RasterizeUv(const TriMesh& mesh, int width, int height, const std::stri
   raster.height = height;
   raster.num_triangles = num_faces;
   const size_t num_texels = static_cast<size_t>(width) * static_cast<size_t>(height);
-  raster.triangle.assign(num_texels, -1);
-  raster.barycentric.assign(num_texels, Eigen::Vector3f::Zero());
+  // Filled band by band below (in parallel, while the rows are in cache).
+  raster.triangle.resize(num_texels);
+  raster.barycentric.resize(num_texels);
   std::vector<int> band_overlaps(static_cast<size_t>(num_bands), 0);
 
   tbb::parallel_for(tbb::blocked_range<int>(0, num_bands, 1), [&](const tbb::blocked_range<int>& r) {
     for (int b = r.begin(); b != r.end(); ++b) {
       const int row_begin = b * kBandRows, row_end = std::min(height, row_begin + kBandRows) - 1;
+      const size_t first_texel = static_cast<size_t>(row_begin) * static_cast<size_t>(width);
+      const size_t end_texel = static_cast<size_t>(row_end + 1) * static_cast<size_t>(width);
+      std::fill(raster.triangle.begin() + first_texel, raster.triangle.begin() + end_texel, -1);
+      std::fill(raster.barycentric.begin() + first_texel, raster.barycentric.begin() + end_texel,
+                Eigen::Vector3f::Zero());
       int overlaps = 0;
-      for (const int f : band_triangles[static_cast<size_t>(b)]) {
-        const TriangleSetup& s = setup[static_cast<size_t>(f)];
+      for (size_t n = band_offset[static_cast<size_t>(b)]; n < band_offset[static_cast<size_t>(b) + 1]; ++n) {
+        const int f = band_triangles[n];
+        // Set up again in every band the triangle touches: cheaper than storing it.
+        const TriangleSetup s = SetUp(mesh, sx, sy, f, width, height);
+        if (!s.active) continue;
         const int j_first = std::max(s.j0, row_begin), j_last = std::min(s.j1, row_end);
         // Edge k runs from vertex k to vertex k+1; E_k(p) = dx_k·(py − y_k) − dy_k·(px − x_k).
         int64_t dx[3], dy[3];
@@ -201,19 +235,35 @@ cv::Mat InterpolateToUv(const UvRaster& raster, const TriMesh& mesh, const Eigen
           fmt::format("InterpolateToUv: malformed UV raster ({}×{} with {} triangle and {} barycentric entries)",
                       raster.width, raster.height, raster.triangle.size(), raster.barycentric.size()));
 
-  cv::Mat out(raster.height, raster.width, CV_32FC(channels), cv::Scalar::all(0));
+  // Vertex data as contiguous rows (one cache line per vertex, not C columns apart).
+  const int num_vertices = mesh.num_vertices();
+  std::vector<double> data(static_cast<size_t>(num_vertices) * static_cast<size_t>(channels));
+  tbb::parallel_for(tbb::blocked_range<int>(0, num_vertices, 4096), [&](const tbb::blocked_range<int>& r) {
+    for (int v = r.begin(); v != r.end(); ++v) {
+      for (int ch = 0; ch < channels; ++ch) {
+        data[static_cast<size_t>(v) * channels + ch] = per_vertex(v, ch);
+      }
+    }
+  });
+
+  cv::Mat out(raster.height, raster.width, CV_32FC(channels));  // every texel is written below
   tbb::parallel_for(tbb::blocked_range<int>(0, raster.height, 8), [&](const tbb::blocked_range<int>& r) {
     for (int j = r.begin(); j != r.end(); ++j) {
       float* row = out.ptr<float>(j);
       for (int i = 0; i < raster.width; ++i) {
         const size_t idx = static_cast<size_t>(j) * static_cast<size_t>(raster.width) + static_cast<size_t>(i);
+        float* px = row + static_cast<size_t>(i) * channels;
         const int f = raster.triangle[idx];
-        if (f < 0) continue;
-        const Eigen::Vector3f& w = raster.barycentric[idx];
-        const int a = mesh.F(f, 0), b = mesh.F(f, 1), c = mesh.F(f, 2);
+        if (f < 0) {
+          for (int ch = 0; ch < channels; ++ch) px[ch] = 0.0f;
+          continue;
+        }
+        const Eigen::Vector3d w = raster.barycentric[idx].cast<double>();
+        const double* a = data.data() + static_cast<size_t>(mesh.F(f, 0)) * channels;
+        const double* b = data.data() + static_cast<size_t>(mesh.F(f, 1)) * channels;
+        const double* c = data.data() + static_cast<size_t>(mesh.F(f, 2)) * channels;
         for (int ch = 0; ch < channels; ++ch) {
-          row[i * channels + ch] = static_cast<float>(w[0] * per_vertex(a, ch) + w[1] * per_vertex(b, ch) +
-                                                      w[2] * per_vertex(c, ch));
+          px[ch] = static_cast<float>(w[0] * a[ch] + w[1] * b[ch] + w[2] * c[ch]);
         }
       }
     }

@@ -149,7 +149,9 @@ TEST(RigImport, SampleObjFolder) {
   std::map<int, int> first;
   for (int v = 0; v < rig.num_vertices(); ++v) {
     auto [it, inserted] = first.emplace(rig.original_vertex[v], v);
-    if (!inserted) EXPECT_EQ(rig.neutral.V.row(v), rig.neutral.V.row(it->second));
+    if (!inserted) {
+      EXPECT_EQ(rig.neutral.V.row(v), rig.neutral.V.row(it->second));
+    }
   }
   // Regions are non-empty and where they belong.
   for (const auto& r : rig.regions) EXPECT_GT(cv::countNonZero(r.mask), 100) << r.name;

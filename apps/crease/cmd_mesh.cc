@@ -1,0 +1,168 @@
+// crease mesh info | convert | render
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "apps/crease/commands.h"
+#include "core/error.h"
+#include "core/file_util.h"
+#include "core/image_io.h"
+#include "core/mesh_io.h"
+#include "core/mesh_ops.h"
+#include "core/preview_render.h"
+#include "core/timer.h"
+#include "core/vtk_io.h"
+
+namespace crease::app {
+namespace fs = std::filesystem;
+
+namespace {
+
+nlohmann::json MeshInfo(const fs::path& path, const TriMesh& mesh, const std::vector<VertexField>& fields) {
+  const auto [lo, hi] = BoundingBox(mesh);
+  const EdgeStats e = ComputeEdgeStats(mesh);
+  nlohmann::json j;
+  j["file"] = path.string();
+  j["vertices"] = mesh.num_vertices();
+  j["triangles"] = mesh.num_faces();
+  j["has_uv"] = mesh.has_uv();
+  j["has_normals"] = mesh.has_normals();
+  j["bbox_min_mm"] = {lo.x(), lo.y(), lo.z()};
+  j["bbox_max_mm"] = {hi.x(), hi.y(), hi.z()};
+  j["extent_mm"] = {hi.x() - lo.x(), hi.y() - lo.y(), hi.z() - lo.z()};
+  j["surface_area_mm2"] = TriangleAreas(mesh).sum();
+  j["mean_edge_length_mm"] = MeanEdgeLength(mesh);
+  j["edges"] = e.edges;
+  j["boundary_edges"] = e.boundary;
+  j["non_manifold_edges"] = e.non_manifold;
+  if (mesh.has_uv()) {
+    j["uv_min"] = {mesh.UV.col(0).minCoeff(), mesh.UV.col(1).minCoeff()};
+    j["uv_max"] = {mesh.UV.col(0).maxCoeff(), mesh.UV.col(1).maxCoeff()};
+  }
+  nlohmann::json f = nlohmann::json::array();
+  for (const auto& field : fields) f.push_back({{"name", field.name}, {"components", field.values.cols()}});
+  j["fields"] = f;
+  return j;
+}
+
+void WriteMeshFile(const fs::path& out, const TriMesh& mesh, bool ascii, bool single,
+                   const std::vector<VertexField>& fields) {
+  const std::string ext = LowerExtension(out);
+  if (ext == ".ply") {
+    WritePly(out, mesh, {.binary = !ascii, .double_precision = !single});
+  } else if (ext == ".vtp") {
+    WriteVtp(out, mesh, fields, !ascii);
+  } else {
+    WriteAnyMesh(out, mesh);
+  }
+}
+
+}  // namespace
+
+void AddMeshCommands(CLI::App& app) {
+  auto* mesh = app.add_subcommand("mesh", "Inspect, convert and render triangle meshes (PLY, OBJ, VTP)");
+  mesh->require_subcommand(1);
+
+  // mesh info
+  {
+    auto* cmd = mesh->add_subcommand("info", "Print a mesh's size, bounds, topology and fields; validates it");
+    static std::string file;
+    static bool as_json = false;
+    cmd->add_option("FILE", file, "Mesh file (.ply, .obj, .vtp)")->required();
+    cmd->add_flag("--json", as_json, "Print JSON instead of text");
+    cmd->callback([] {
+      std::vector<VertexField> fields;
+      const TriMesh m = LowerExtension(file) == ".vtp" ? ReadVtp(file, &fields) : ReadAnyMesh(file);
+      ValidateMesh(m, file);
+      const nlohmann::json j = MeshInfo(file, m, fields);
+      if (as_json) {
+        std::printf("%s\n", j.dump(2).c_str());
+        return;
+      }
+      std::printf("%s\n", file.c_str());
+      std::printf("  vertices           %d\n", m.num_vertices());
+      std::printf("  triangles          %d\n", m.num_faces());
+      std::printf("  uv                 %s\n", m.has_uv() ? "yes" : "no");
+      std::printf("  normals            %s\n", m.has_normals() ? "yes" : "no");
+      const auto& ext = j["extent_mm"];
+      std::printf("  extent (mm)        %.3f x %.3f x %.3f\n", ext[0].get<double>(), ext[1].get<double>(),
+                  ext[2].get<double>());
+      std::printf("  surface area (mm2) %.3f\n", j["surface_area_mm2"].get<double>());
+      std::printf("  mean edge (mm)     %.4f\n", j["mean_edge_length_mm"].get<double>());
+      std::printf("  edges              %d (%d boundary, %d non-manifold)\n", j["edges"].get<int>(),
+                  j["boundary_edges"].get<int>(), j["non_manifold_edges"].get<int>());
+      for (const auto& f : fields) {
+        std::printf("  field              %s (%ld components)\n", f.name.c_str(), static_cast<long>(f.values.cols()));
+      }
+    });
+  }
+
+  // mesh convert
+  {
+    auto* cmd = mesh->add_subcommand("convert", "Convert between PLY, OBJ and VTP (VTP fields are kept VTP to VTP)");
+    static std::string in, out;
+    static bool ascii = false, single = false, normals = false;
+    cmd->add_option("IN", in, "Input mesh (.ply, .obj, .vtp)")->required();
+    cmd->add_option("OUT", out, "Output mesh (.ply, .obj, .vtp)")->required();
+    cmd->add_flag("--ascii", ascii, "ASCII PLY / VTP instead of binary");
+    cmd->add_flag("--float", single, "PLY: 32-bit float coordinates instead of 64-bit");
+    cmd->add_flag("--normals", normals, "Compute area-weighted vertex normals and write them");
+    cmd->callback([] {
+      std::vector<VertexField> fields;
+      TriMesh m = LowerExtension(in) == ".vtp" ? ReadVtp(in, &fields) : ReadAnyMesh(in);
+      ValidateMesh(m, in);
+      if (normals) m.N = VertexNormals(m);
+      WriteMeshFile(out, m, ascii, single, fields);
+      std::printf("wrote %s (%d vertices, %d triangles)\n", out.c_str(), m.num_vertices(), m.num_faces());
+    });
+  }
+
+  // mesh render
+  {
+    auto* cmd = mesh->add_subcommand("render", "Ray-trace a shaded preview image of a mesh (Embree)");
+    static std::string in, out, field;
+    static PreviewRenderOptions opt;
+    static bool no_shadows = false, diverging = false;
+    static std::vector<double> range;
+    cmd->add_option("FILE", in, "Mesh (.ply, .obj, .vtp)")->required();
+    cmd->add_option("--out,-o", out, "Output image (.png, .exr, .jpg)")->required();
+    cmd->add_option("--width", opt.width, "Image width (pixels)")->capture_default_str();
+    cmd->add_option("--height", opt.height, "Image height (pixels)")->capture_default_str();
+    cmd->add_option("--fov", opt.fov_deg, "Horizontal field of view (degrees)")->capture_default_str();
+    cmd->add_option("--azimuth", opt.azimuth_deg, "Camera orbit about +y (degrees)")->capture_default_str();
+    cmd->add_option("--elevation", opt.elevation_deg, "Camera orbit upwards (degrees)")->capture_default_str();
+    cmd->add_flag("--no-shadows", no_shadows, "Do not trace shadow rays");
+    cmd->add_option("--field", field, "VTP input: colour by this per-vertex scalar field (or vector magnitude)");
+    cmd->add_option("--range", range, "Colour range LO HI for --field (default: the field's min and max)")->expected(2);
+    cmd->add_flag("--diverging", diverging, "Use a blue-white-red map for --field (signed data)");
+    cmd->callback([] {
+      opt.shadows = !no_shadows;
+      std::vector<VertexField> fields;
+      const TriMesh m = LowerExtension(in) == ".vtp" ? ReadVtp(in, &fields) : ReadAnyMesh(in);
+      MatX3d colors;
+      if (!field.empty()) {
+        const VertexField* f = nullptr;
+        for (const auto& x : fields) f = x.name == field ? &x : f;
+        if (!f) throw Error(fmt::format("{}: has no per-vertex field '{}'", in, field));
+        const Eigen::VectorXd s = f->values.cols() == 1 ? Eigen::VectorXd(f->values.col(0))
+                                                        : Eigen::VectorXd(f->values.rowwise().norm());
+        const double lo = range.size() == 2 ? range[0] : s.minCoeff();
+        const double hi = range.size() == 2 ? range[1] : s.maxCoeff();
+        colors = ScalarToColors(s, lo, hi, diverging);
+      }
+      TimingReport timing;
+      PreviewRender r;
+      {
+        ScopedTimer t(&timing, "render");
+        r = RenderPreview(m, opt, colors);
+      }
+      WriteImage(out, r.image);
+      std::printf("wrote %s (%dx%d, %d triangles, %.0f ms, %d pixels on the mesh)\n", out.c_str(), opt.width,
+                  opt.height, m.num_faces(), 1e3 * timing.TotalSeconds(), r.covered_pixels);
+    });
+  }
+}
+
+}  // namespace crease::app

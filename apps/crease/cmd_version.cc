@@ -1,0 +1,38 @@
+#include <cstdio>
+#include <string>
+
+#include <CLI/Version.hpp>
+#include <Eigen/Core>
+#include <ceres/version.h>
+#include <embree3/rtcore_config.h>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <oneapi/tbb/version.h>
+#include <opencv2/core/version.hpp>
+#include <OpenImageIO/oiioversion.h>
+#include <vtkVersionMacros.h>
+
+#include "apps/crease/commands.h"
+
+namespace crease::app {
+
+void AddVersionCommand(CLI::App& app) {
+  auto* cmd = app.add_subcommand("version", "Print crease's version and the libraries it was built with");
+  cmd->callback([] {
+    std::printf("crease %s\n", CREASE_VERSION);
+    std::printf("  compiler     %s\n", __VERSION__);
+    std::printf("  Eigen        %d.%d.%d\n", EIGEN_WORLD_VERSION, EIGEN_MAJOR_VERSION, EIGEN_MINOR_VERSION);
+    std::printf("  OpenCV       %s\n", CV_VERSION);
+    std::printf("  Embree       %s\n", RTC_VERSION_STRING);
+    std::printf("  OpenImageIO  %s\n", OIIO_VERSION_STRING);
+    std::printf("  VTK          %s\n", VTK_VERSION);
+    std::printf("  Ceres        %s\n", CERES_VERSION_STRING);
+    std::printf("  oneTBB       %s\n", TBB_VERSION_STRING);
+    std::printf("  CLI11        %s\n", CLI11_VERSION);
+    std::printf("  nlohmann     %d.%d.%d\n", NLOHMANN_JSON_VERSION_MAJOR, NLOHMANN_JSON_VERSION_MINOR,
+                NLOHMANN_JSON_VERSION_PATCH);
+    std::printf("  fmt          %d.%d.%d\n", FMT_VERSION / 10000, FMT_VERSION / 100 % 100, FMT_VERSION % 100);
+  });
+}
+
+}  // namespace crease::app

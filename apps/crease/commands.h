@@ -1,0 +1,14 @@
+// Subcommands of the `crease` program. Each Add*Commands registers its
+// subcommands on the app; flags are parsed here only and turned into the
+// libraries' Options structs (libraries never see argv).
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+namespace crease::app {
+
+void AddVersionCommand(CLI::App& app);
+void AddMeshCommands(CLI::App& app);
+void AddRigCommands(CLI::App& app);
+
+}  // namespace crease::app
