@@ -11,6 +11,7 @@
 
 #include <cmath>
 #include <memory>
+#include <numbers>
 #include <vector>
 
 #include "core/mesh_primitives.h"
@@ -93,23 +94,42 @@ const std::vector<Ray>& IncoherentRays() {
   return rays;
 }
 
-// Detail-extraction-like queries: random points within ±1 mm of the surface,
-// direction = the sphere's normal, searched up to 5 mm both ways.
+// Detail-extraction-like queries: points within ±1 mm of the surface, direction =
+// the sphere's normal, searched up to 5 mm both ways. `ordered`: the points follow
+// a 640×480 latitude-longitude grid in scanline order (like the texels of a map);
+// otherwise they are uniformly random on the sphere, in random order.
 struct SignedQueries {
   std::vector<Eigen::Vector3f> origins, directions;
 };
-const SignedQueries& Signed() {
-  static const SignedQueries q = [] {
-    Rng rng(43);
-    SignedQueries s;
-    for (int i = 0; i < kNumRays; ++i) {
-      const Eigen::Vector3f n = RandomUnit(rng);
-      s.origins.push_back(static_cast<float>(kRadius + rng.Uniform(-1.0, 1.0)) * n);
-      s.directions.push_back(n);
-    }
-    return s;
-  }();
-  return q;
+const SignedQueries& Signed(bool ordered) {
+  static const SignedQueries queries[2] = {
+      [] {
+        Rng rng(43);
+        SignedQueries s;
+        for (int i = 0; i < kNumRays; ++i) {
+          const Eigen::Vector3f n = RandomUnit(rng);
+          s.origins.push_back(static_cast<float>(kRadius + rng.Uniform(-1.0, 1.0)) * n);
+          s.directions.push_back(n);
+        }
+        return s;
+      }(),
+      [] {
+        Rng rng(44);
+        SignedQueries s;
+        for (int r = 0; r < kHeight; ++r) {
+          const double theta = std::numbers::pi * (r + 0.5) / kHeight;
+          for (int c = 0; c < kWidth; ++c) {
+            const double phi = 2.0 * std::numbers::pi * (c + 0.5) / kWidth;
+            const Eigen::Vector3f n(static_cast<float>(std::sin(theta) * std::cos(phi)),
+                                    static_cast<float>(std::sin(theta) * std::sin(phi)),
+                                    static_cast<float>(std::cos(theta)));
+            s.origins.push_back(static_cast<float>(kRadius + rng.Uniform(-1.0, 1.0)) * n);
+            s.directions.push_back(n);
+          }
+        }
+        return s;
+      }()};
+  return queries[ordered ? 1 : 0];
 }
 
 void BM_PrimaryRays(benchmark::State& state) {
@@ -160,7 +180,8 @@ BENCHMARK(BM_OccludedRays)->ArgNames({"threads", "primary"})->ArgsProduct({{1, 2
 
 void BM_SignedBothWays(benchmark::State& state) {
   const RayCaster& caster = Caster();
-  const SignedQueries& q = Signed();
+  const bool ordered = state.range(1) != 0;
+  const SignedQueries& q = Signed(ordered);
   const auto limit = Threads(state);
   std::vector<SignedHit> hits;
   for (auto _ : state) {
@@ -168,8 +189,10 @@ void BM_SignedBothWays(benchmark::State& state) {
     benchmark::DoNotOptimize(hits.data());
   }
   state.SetItemsProcessed(state.iterations() * kNumRays);  // queries (up to 2 rays each)
+  state.SetLabel(ordered ? "grid order" : "random order");
 }
-BENCHMARK(BM_SignedBothWays)->ArgName("threads")->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_SignedBothWays)->ArgNames({"threads", "ordered"})->ArgsProduct({{1, 2}, {0, 1}})
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Second argument: 0 low, 1 medium, 2 high, 3 dynamic (refittable).
 void BM_BuildBvh(benchmark::State& state) {

@@ -139,6 +139,14 @@ MatX3d VertexNormals(const TriMesh& mesh) {
     const Eigen::RowVector3d n = (p1 - p0).cross(p2 - p0).transpose();
     for (int k = 0; k < 3; ++k) N.row(mesh.F(f, k)) += n;
   }
+  // Vertices duplicated along UV seams share one normal (sum over all copies).
+  const std::vector<int> rep = CoincidentVertexRepresentatives(mesh);
+  for (int i = 0; i < N.rows(); ++i) {
+    if (rep[i] != i) N.row(rep[i]) += N.row(i);
+  }
+  for (int i = 0; i < N.rows(); ++i) {
+    if (rep[i] != i) N.row(i) = N.row(rep[i]);
+  }
   for (int i = 0; i < N.rows(); ++i) {
     const double len = N.row(i).norm();
     if (len > 0.0) {
@@ -259,9 +267,14 @@ struct MeshLowpass::Impl {
   Ldlt solver;               // M + τL with identity rows for fixed vertices
 };
 
-MeshLowpass::MeshLowpass(const TriMesh& mesh, const LowpassOptions& options)
-    : options_(options), num_vertices_(mesh.num_vertices()) {
+MeshLowpass::MeshLowpass(const TriMesh& input_mesh, const LowpassOptions& options)
+    : options_(options), num_vertices_(input_mesh.num_vertices()) {
   options_.Check();
+  // Filter on the seam-welded mesh so UV seams are not boundaries.
+  auto weld = std::make_shared<const WeldedMesh>(WeldCoincidentVertices(input_mesh));
+  const TriMesh& mesh = weld->mesh;
+  num_inner_ = mesh.num_vertices();
+  if (num_inner_ < num_vertices_) weld_ = weld;
   const double sigma = options_.bandwidth_mm;
   t_ = 0.5 * sigma * sigma;
   if (t_ == 0.0) return;
@@ -270,10 +283,10 @@ MeshLowpass::MeshLowpass(const TriMesh& mesh, const LowpassOptions& options)
   const SpMat M = MassMatrix(mesh, MassMatrixTypeFromString(options_.mass_matrix));
   const SpMat L = CotangentLaplacian(mesh);
   impl->mass = M.diagonal();
-  impl->fixed.assign(num_vertices_, 0);
+  impl->fixed.assign(num_inner_, 0);
   const std::vector<char> boundary =
-      options_.boundary == "fixed" ? BoundaryMask(mesh) : std::vector<char>(num_vertices_, 0);
-  for (int i = 0; i < num_vertices_; ++i) {
+      options_.boundary == "fixed" ? BoundaryMask(mesh) : std::vector<char>(num_inner_, 0);
+  for (int i = 0; i < num_inner_; ++i) {
     impl->fixed[i] = boundary[i] || !(impl->mass[i] > 0.0);
   }
   const SpMat A = SpMat(M + tau * L);
@@ -282,16 +295,13 @@ MeshLowpass::MeshLowpass(const TriMesh& mesh, const LowpassOptions& options)
   impl_ = std::move(impl);
 }
 
-Eigen::VectorXd MeshLowpass::Apply(const Eigen::VectorXd& x) const {
-  Require(x.size() == num_vertices_,
-          fmt::format("MeshLowpass::Apply: signal has {} values, but the mesh has {} vertices",
-                      x.size(), num_vertices_));
+Eigen::VectorXd MeshLowpass::ApplyInner(const Eigen::VectorXd& x) const {
   if (!impl_) return x;
   Eigen::VectorXd cur = x;
   for (int s = 0; s < options_.steps; ++s) {
     // One backward-Euler step (M + τL) x_{k+1} = M x_k of G (Sec. 4.1), fixed vertices held.
     Eigen::VectorXd rhs = impl_->mass.cwiseProduct(cur) - impl_->coupling * x;
-    for (int i = 0; i < num_vertices_; ++i) {
+    for (int i = 0; i < num_inner_; ++i) {
       if (impl_->fixed[i]) rhs[i] = x[i];
     }
     cur = impl_->solver.solve(rhs);
@@ -299,22 +309,56 @@ Eigen::VectorXd MeshLowpass::Apply(const Eigen::VectorXd& x) const {
   return cur;
 }
 
-MatX3d MeshLowpass::Apply(const MatX3d& X) const {
-  Require(X.rows() == num_vertices_,
-          fmt::format("MeshLowpass::Apply: signal has {} rows, but the mesh has {} vertices",
-                      X.rows(), num_vertices_));
+Eigen::MatrixXd MeshLowpass::ApplyInner(const Eigen::MatrixXd& X) const {
   if (!impl_) return X;
-  const Eigen::MatrixXd X0 = X;  // column-major for the solver
+  const Eigen::MatrixXd& X0 = X;
   const Eigen::MatrixXd held = impl_->coupling * X0;
   Eigen::MatrixXd cur = X0;
   for (int s = 0; s < options_.steps; ++s) {
     Eigen::MatrixXd rhs = impl_->mass.asDiagonal() * cur - held;
-    for (int i = 0; i < num_vertices_; ++i) {
+    for (int i = 0; i < num_inner_; ++i) {
       if (impl_->fixed[i]) rhs.row(i) = X0.row(i);
     }
     cur = impl_->solver.solve(rhs);
   }
   return cur;
+}
+
+Eigen::MatrixXd MeshLowpass::Gather(const Eigen::MatrixXd& X) const {
+  if (!weld_) return X;
+  // Seam copies are averaged into their welded vertex.
+  Eigen::MatrixXd W = Eigen::MatrixXd::Zero(num_inner_, X.cols());
+  Eigen::VectorXd count = Eigen::VectorXd::Zero(num_inner_);
+  for (int v = 0; v < num_vertices_; ++v) {
+    W.row(weld_->welded_of[v]) += X.row(v);
+    count[weld_->welded_of[v]] += 1.0;
+  }
+  for (int w = 0; w < num_inner_; ++w) W.row(w) /= count[w];
+  return W;
+}
+
+Eigen::MatrixXd MeshLowpass::Scatter(const Eigen::MatrixXd& W) const {
+  if (!weld_) return W;
+  Eigen::MatrixXd X(num_vertices_, W.cols());
+  for (int v = 0; v < num_vertices_; ++v) X.row(v) = W.row(weld_->welded_of[v]);
+  return X;
+}
+
+Eigen::VectorXd MeshLowpass::Apply(const Eigen::VectorXd& x) const {
+  Require(x.size() == num_vertices_,
+          fmt::format("MeshLowpass::Apply: signal has {} values, but the mesh has {} vertices",
+                      x.size(), num_vertices_));
+  if (!impl_) return x;
+  if (!weld_) return ApplyInner(x);
+  return Scatter(ApplyInner(Eigen::VectorXd(Gather(x))));
+}
+
+MatX3d MeshLowpass::Apply(const MatX3d& X) const {
+  Require(X.rows() == num_vertices_,
+          fmt::format("MeshLowpass::Apply: signal has {} rows, but the mesh has {} vertices",
+                      X.rows(), num_vertices_));
+  if (!impl_) return X;
+  return Scatter(ApplyInner(Gather(Eigen::MatrixXd(X))));
 }
 
 double MeshLowpass::Response(double wavenumber) const {
@@ -362,15 +406,20 @@ struct GeodesicDistance::Impl {
   Ldlt heat_neumann, heat_dirichlet, poisson;
 };
 
-GeodesicDistance::GeodesicDistance(const TriMesh& mesh, const GeodesicOptions& options)
-    : num_vertices_(mesh.num_vertices()) {
+GeodesicDistance::GeodesicDistance(const TriMesh& input_mesh, const GeodesicOptions& options)
+    : num_vertices_(input_mesh.num_vertices()) {
   options.Check();
+  // Distances flow across UV seams: work on the seam-welded mesh.
+  auto weld = std::make_shared<const WeldedMesh>(WeldCoincidentVertices(input_mesh));
+  const TriMesh& mesh = weld->mesh;
+  num_inner_ = mesh.num_vertices();
+  if (num_inner_ < num_vertices_) weld_ = weld;
   RequireFaceIndices(mesh, "GeodesicDistance");
   Require(mesh.num_faces() > 0, "GeodesicDistance: mesh has no triangles");
   const double h = MeanEdgeLength(mesh);
   t_ = options.time_factor * h * h;
   auto impl = std::make_shared<Impl>();
-  const int nv = num_vertices_;
+  const int nv = num_inner_;
   impl->F = mesh.F;
   impl->V = mesh.V;
   impl->one_ring_offset = options.one_ring_offset;
@@ -426,13 +475,8 @@ GeodesicDistance::GeodesicDistance(const TriMesh& mesh, const GeodesicOptions& o
   impl_ = std::move(impl);
 }
 
-Eigen::VectorXd GeodesicDistance::From(const std::vector<int>& sources) const {
-  Require(!sources.empty(), "GeodesicDistance::From: no source vertices given");
-  const int nv = num_vertices_;
-  for (int s : sources) {
-    Require(s >= 0 && s < nv, fmt::format("GeodesicDistance::From: source vertex {} is out of "
-                                          "range (the mesh has {} vertices)", s, nv));
-  }
+Eigen::VectorXd GeodesicDistance::FromInner(const std::vector<int>& sources) const {
+  const int nv = num_inner_;
   const Impl& m = *impl_;
   Eigen::VectorXd delta = Eigen::VectorXd::Zero(nv);
   for (int s : sources) delta[s] = 1.0;
@@ -513,6 +557,23 @@ Eigen::VectorXd GeodesicDistance::From(const std::vector<int>& sources) const {
   }
   for (int s : sources) phi[s] = 0.0;
   return phi;
+}
+
+Eigen::VectorXd GeodesicDistance::From(const std::vector<int>& sources) const {
+  Require(!sources.empty(), "GeodesicDistance::From: no source vertices given");
+  for (int s : sources) {
+    Require(s >= 0 && s < num_vertices_, fmt::format("GeodesicDistance::From: source vertex {} is out of "
+                                                     "range (the mesh has {} vertices)", s, num_vertices_));
+  }
+  if (!weld_) return FromInner(sources);
+  std::vector<int> inner;
+  for (int s : sources) inner.push_back(weld_->welded_of[s]);
+  std::sort(inner.begin(), inner.end());
+  inner.erase(std::unique(inner.begin(), inner.end()), inner.end());
+  const Eigen::VectorXd d = FromInner(inner);
+  Eigen::VectorXd out(num_vertices_);
+  for (int v = 0; v < num_vertices_; ++v) out[v] = d[weld_->welded_of[v]];
+  return out;
 }
 
 // ---------------------------------------------------------------------------

@@ -32,6 +32,9 @@ class OptionVisitor;
 // Area-weighted vertex normals: n_i = normalise(Σ_{f ∋ i} (p1 − p0) × (p2 − p0)),
 // i.e. the sum of the unnormalised face normals (each of length 2·area_f).
 // Returns #V×3 unit vectors pointing outwards for counter-clockwise triangles.
+// Vertices duplicated along UV seams (bit-identical positions) get one shared
+// normal, the sum over all their copies, so shading and displacement along
+// normals stay continuous across seams.
 // Vertices in no triangle, or whose incident face normals sum to zero (only
 // degenerate triangles, or a pinched fold), get (0, 0, 0): callers that divide
 // by the normal must check.
@@ -125,7 +128,9 @@ struct LowpassOptions {
 // vertex by vertex. Apply is const and may be called from several threads.
 class MeshLowpass {
  public:
-  // Builds M, L of `mesh` and factorises. Vertices without area (in no
+  // Builds M, L of `mesh` and factorises. Vertices duplicated along UV seams are
+  // welded first (core/tri_mesh.h), so seams are not boundaries; their copies
+  // are averaged on input and get the same filtered value. Vertices without area (in no
   // non-degenerate triangle) keep their input values. Throws Error on invalid
   // options or if the factorisation fails.
   explicit MeshLowpass(const TriMesh& mesh, const LowpassOptions& options = {});
@@ -147,9 +152,15 @@ class MeshLowpass {
 
  private:
   struct Impl;
+  Eigen::VectorXd ApplyInner(const Eigen::VectorXd& x) const;
+  Eigen::MatrixXd ApplyInner(const Eigen::MatrixXd& X) const;
+  Eigen::MatrixXd Gather(const Eigen::MatrixXd& X) const;   // #V → welded (seam copies averaged)
+  Eigen::MatrixXd Scatter(const Eigen::MatrixXd& W) const;  // welded → #V
   LowpassOptions options_;
   double t_ = 0.0;
-  int num_vertices_ = 0;
+  int num_vertices_ = 0;  // of the input mesh
+  int num_inner_ = 0;     // after welding UV seams
+  std::shared_ptr<const WeldedMesh> weld_;  // null when the mesh has no seam copies
   std::shared_ptr<const Impl> impl_;  // null when bandwidth_mm == 0
 };
 
@@ -207,7 +218,8 @@ struct GeodesicOptions {
 // (by up to ~0.65 h measured). From is const and may be called from several threads.
 class GeodesicDistance {
  public:
-  // Throws Error on invalid options or if a factorisation fails.
+  // Vertices duplicated along UV seams are welded first, so distances flow
+  // across seams. Throws Error on invalid options or if a factorisation fails.
   explicit GeodesicDistance(const TriMesh& mesh, const GeodesicOptions& options = {});
 
   // Distances (mm, along the surface) from the nearest of `sources` (vertex
@@ -222,8 +234,11 @@ class GeodesicDistance {
 
  private:
   struct Impl;
+  Eigen::VectorXd FromInner(const std::vector<int>& sources) const;  // welded ids
   double t_ = 0.0;
-  int num_vertices_ = 0;
+  int num_vertices_ = 0;  // of the input mesh
+  int num_inner_ = 0;     // after welding UV seams
+  std::shared_ptr<const WeldedMesh> weld_;  // null when the mesh has no seam copies
   std::shared_ptr<const Impl> impl_;
 };
 

@@ -53,9 +53,13 @@ TriMesh MakeUVSphere(double radius, int rings, int segments) {
   for (int j = 0; j < vy; ++j) {
     const double theta = pi * j / rings;  // colatitude from +z
     for (int i = 0; i < vx; ++i) {
-      const double phi = 2.0 * pi * i / segments;
-      const Eigen::Vector3d n(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi),
-                              std::cos(theta));
+      // The seam column (i = segments) and the poles repeat positions bit for bit,
+      // as the seam copies of an imported mesh do.
+      const double phi = i == segments ? 0.0 : 2.0 * pi * i / segments;
+      Eigen::Vector3d n(std::sin(theta) * std::cos(phi), std::sin(theta) * std::sin(phi),
+                        std::cos(theta));
+      if (j == 0) n = Eigen::Vector3d::UnitZ();
+      if (j == rings) n = -Eigen::Vector3d::UnitZ();
       const int id = j * vx + i;
       m.V.row(id) = radius * n.transpose();
       m.N.row(id) = n.transpose();

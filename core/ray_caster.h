@@ -85,6 +85,7 @@ class RayCaster {
   explicit RayCaster(const TriMesh& mesh, const RayCasterOptions& options = {},
                      const std::string& what = "RayCaster mesh");
   ~RayCaster();
+  // A moved-from RayCaster may only be destroyed or assigned to.
   RayCaster(RayCaster&&) noexcept;
   RayCaster& operator=(RayCaster&&) noexcept;
   RayCaster(const RayCaster&) = delete;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 #include <fmt/format.h>
 
 #include "core/error.h"
@@ -102,6 +103,48 @@ double MeanEdgeLength(const TriMesh& mesh) {
     }
   }
   return sum / (3.0 * mesh.num_faces());
+}
+
+std::vector<int> CoincidentVertexRepresentatives(const TriMesh& mesh) {
+  const int nv = mesh.num_vertices();
+  std::vector<int> order(nv);
+  for (int i = 0; i < nv; ++i) order[i] = i;
+  auto key = [&](int i) { return std::make_tuple(mesh.V(i, 0), mesh.V(i, 1), mesh.V(i, 2)); };
+  std::sort(order.begin(), order.end(), [&](int a, int b) {
+    const auto ka = key(a), kb = key(b);
+    return ka != kb ? ka < kb : a < b;
+  });
+  std::vector<int> rep(nv);
+  for (int i = 0; i < nv;) {
+    int j = i;
+    while (j < nv && key(order[j]) == key(order[i])) rep[order[j++]] = order[i];
+    i = j;
+  }
+  return rep;
+}
+
+WeldedMesh WeldCoincidentVertices(const TriMesh& mesh) {
+  const std::vector<int> rep = CoincidentVertexRepresentatives(mesh);
+  WeldedMesh w;
+  w.welded_of.assign(mesh.num_vertices(), -1);
+  for (int v = 0; v < mesh.num_vertices(); ++v) {
+    if (rep[v] == v) {
+      w.welded_of[v] = static_cast<int>(w.vertex_of.size());
+      w.vertex_of.push_back(v);
+    }
+  }
+  for (int v = 0; v < mesh.num_vertices(); ++v) w.welded_of[v] = w.welded_of[rep[v]];
+  w.mesh.V.resize(static_cast<int>(w.vertex_of.size()), 3);
+  for (size_t i = 0; i < w.vertex_of.size(); ++i) w.mesh.V.row(static_cast<int>(i)) = mesh.V.row(w.vertex_of[i]);
+  std::vector<Eigen::Vector3i> faces;
+  faces.reserve(mesh.num_faces());
+  for (int f = 0; f < mesh.num_faces(); ++f) {
+    const Eigen::Vector3i t(w.welded_of[mesh.F(f, 0)], w.welded_of[mesh.F(f, 1)], w.welded_of[mesh.F(f, 2)]);
+    if (t[0] != t[1] && t[1] != t[2] && t[0] != t[2]) faces.push_back(t);
+  }
+  w.mesh.F.resize(static_cast<int>(faces.size()), 3);
+  for (size_t f = 0; f < faces.size(); ++f) w.mesh.F.row(static_cast<int>(f)) = faces[f].transpose();
+  return w;
 }
 
 }  // namespace crease

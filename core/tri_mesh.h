@@ -53,4 +53,19 @@ Eigen::VectorXd TriangleAreas(const TriMesh& mesh);
 // Mean edge length, mm.
 double MeanEdgeLength(const TriMesh& mesh);
 
+// UV seams: a mesh with one UV per vertex duplicates the vertices along seams
+// (same position, different UV). Geometry operators must see through them.
+// Per vertex, the lowest-index vertex with bit-identical position (itself when unique).
+std::vector<int> CoincidentVertexRepresentatives(const TriMesh& mesh);
+
+// The mesh with coincident vertices merged (UVs dropped, since they differ along
+// seams): `welded_of[v]` is vertex v's index in `mesh`, `vertex_of[w]` one
+// original vertex of welded vertex w. Triangles that collapse are dropped.
+struct WeldedMesh {
+  TriMesh mesh;
+  std::vector<int> welded_of;
+  std::vector<int> vertex_of;
+};
+WeldedMesh WeldCoincidentVertices(const TriMesh& mesh);
+
 }  // namespace crease

@@ -194,21 +194,31 @@ UvRaster RasterizeUv(const TriMesh& mesh, int width, int height, const std::stri
           const int64_t py = static_cast<int64_t>(j) * kStep + kHalfStep;
           int64_t e[3];
           for (int k = 0; k < 3; ++k) e[k] = dx[k] * (py - s.y[k]) - dy[k] * (px0 - s.x[k]) + s.bias[k];
-          const double v = (j + 0.5) / height;
-          for (int i = s.i0; i <= s.i1; ++i) {
-            if (e[0] >= 0 && e[1] >= 0 && e[2] >= 0) {
-              const size_t idx = static_cast<size_t>(j) * static_cast<size_t>(width) + static_cast<size_t>(i);
-              if (raster.triangle[idx] < 0) {
-                const double du = (i + 0.5) / width - s.au, dv = v - s.av;
-                const double w1 = s.m00 * du + s.m01 * dv, w2 = s.m10 * du + s.m11 * dv;
-                raster.triangle[idx] = f;
-                raster.barycentric[idx] = Eigen::Vector3f(static_cast<float>(1.0 - w1 - w2),
-                                                          static_cast<float>(w1), static_cast<float>(w2));
-              } else {
-                ++overlaps;
-              }
+          // Each E_k is linear along the row, E_k(i) = E_k(i0) − dy_k·S·(i − i0): the
+          // texels with E_k ≥ 0 for all k form one span, found by exact integer division.
+          int64_t lo = s.i0, hi = s.i1;
+          for (int k = 0; k < 3; ++k) {
+            const int64_t step = dy[k] * kStep;
+            if (step == 0) {
+              if (e[k] < 0) hi = lo - 1;
+            } else if (step > 0) {  // decreasing along the row
+              hi = e[k] < 0 ? lo - 1 : std::min(hi, s.i0 + e[k] / step);
+            } else if (e[k] < 0) {  // increasing along the row
+              lo = std::max(lo, s.i0 + (-e[k] - step - 1) / (-step));
             }
-            for (int k = 0; k < 3; ++k) e[k] -= dy[k] * kStep;
+          }
+          const double v = (j + 0.5) / height;
+          for (int64_t i = lo; i <= hi; ++i) {
+            const size_t idx = static_cast<size_t>(j) * static_cast<size_t>(width) + static_cast<size_t>(i);
+            if (raster.triangle[idx] >= 0) {
+              ++overlaps;
+              continue;
+            }
+            const double du = (static_cast<double>(i) + 0.5) / width - s.au, dv = v - s.av;
+            const double w1 = s.m00 * du + s.m01 * dv, w2 = s.m10 * du + s.m11 * dv;
+            raster.triangle[idx] = f;
+            raster.barycentric[idx] =
+                Eigen::Vector3f(static_cast<float>(1.0 - w1 - w2), static_cast<float>(w1), static_cast<float>(w2));
           }
         }
       }

@@ -458,3 +458,63 @@ TEST(GeodesicDistance, MultipleSourcesAndComponents) {
 
 }  // namespace
 }  // namespace crease
+
+namespace crease {
+namespace {
+
+TEST(MeshOpsSeams, NormalsAreContinuousAcrossUvSeams) {
+  const TriMesh m = MakeUVSphere(10.0, 16, 24);
+  const MatX3d N = VertexNormals(m);
+  // Seam copies (i = 0 and i = segments on one ring) share their normal, and it is radial.
+  for (int j = 1; j < 16; ++j) {
+    const int a = j * 25, b = j * 25 + 24;
+    EXPECT_EQ(N.row(a), N.row(b));
+    EXPECT_GT(N.row(a).dot(m.V.row(a).normalized()), 0.999);
+  }
+}
+
+}  // namespace
+}  // namespace crease
+
+namespace crease {
+namespace {
+
+TEST(MeshOpsSeams, LowpassDoesNotSeeUvSeams) {
+  // A sphere with a UV seam: shrinking by the lowpass must stay rotationally
+  // symmetric — the seam column behaves like every other column.
+  const int rings = 24, segments = 32;
+  const TriMesh m = MakeUVSphere(20.0, rings, segments);
+  LowpassOptions opt;
+  opt.bandwidth_mm = 4.0;
+  const MeshLowpass lowpass(m, opt);
+  const MatX3d Y = lowpass.Apply(m.V);
+  const int vx = segments + 1;
+  for (int j = 2; j < rings - 1; ++j) {
+    const double r_seam = Y.row(j * vx).norm();
+    const double r_mid = Y.row(j * vx + segments / 2).norm();
+    EXPECT_NEAR(r_seam, r_mid, 1e-6 * 20.0) << "ring " << j;
+    EXPECT_EQ(Y.row(j * vx), Y.row(j * vx + segments));  // seam copies agree
+    EXPECT_LT(r_seam, 20.0);                              // and it did filter
+  }
+}
+
+}  // namespace
+}  // namespace crease
+
+namespace crease {
+namespace {
+
+TEST(MeshOpsSeams, GeodesicsCrossUvSeams) {
+  const double r = 20.0;
+  const TriMesh m = MakeUVSphere(r, 32, 48);
+  const GeodesicDistance geo(m);
+  const int vx = 49, source = 16 * vx;  // on the equator, on the seam
+  const Eigen::VectorXd d = geo.From({source});
+  // Points just across the seam (i = 47 on the equator) are near, not half a sphere away.
+  const double expect = r * std::acos(m.V.row(source).normalized().dot(m.V.row(16 * vx + 47).normalized()));
+  EXPECT_NEAR(d[16 * vx + 47], expect, 0.1 * expect);
+  EXPECT_EQ(d[16 * vx + 48], 0.0);  // the seam copy of the source
+}
+
+}  // namespace
+}  // namespace crease

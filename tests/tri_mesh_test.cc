@@ -65,3 +65,24 @@ TEST(TriMesh, ValidationNamesTheProblem) {
 
 }  // namespace
 }  // namespace crease
+
+namespace crease {
+namespace {
+
+TEST(TriMesh, WeldingSeesThroughUvSeams) {
+  // A UV sphere duplicates the seam column (u = 0 and u = 1) and the poles.
+  const TriMesh m = MakeUVSphere(10.0, 8, 12);
+  const WeldedMesh w = WeldCoincidentVertices(m);
+  // Closed after welding: (rings−1)·segments + 2 poles.
+  EXPECT_EQ(w.mesh.num_vertices(), 7 * 12 + 2);
+  EXPECT_EQ(ComputeEdgeStats(w.mesh).boundary, 0);
+  EXPECT_EQ(w.mesh.num_faces(), m.num_faces());
+  for (int v = 0; v < m.num_vertices(); ++v) {
+    EXPECT_EQ(m.V.row(v), w.mesh.V.row(w.welded_of[v]));
+  }
+  const auto rep = CoincidentVertexRepresentatives(m);
+  EXPECT_EQ(rep[12], 0);  // first-ring seam copy: vertex (i = 12) duplicates (i = 0) on ring 0
+}
+
+}  // namespace
+}  // namespace crease
