@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/test_util.h"
+
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -13,6 +15,10 @@
 
 namespace crease {
 namespace {
+
+using testing::ErrorOf;
+using testing::TestDir;
+using testing::WriteText;
 namespace fs = std::filesystem;
 
 const fs::path kSampleRig = fs::path(CREASE_DATA_DIR) / "sample_rig";
@@ -33,14 +39,6 @@ FaceRig SmallRig() {
   return rig;
 }
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
 
 TEST(FaceRig, EvaluateIsTheLinearBlendshapeModel) {
   const FaceRig rig = SmallRig();

@@ -2,10 +2,16 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/test_util.h"
+
 #include "core/error.h"
 
 namespace crease {
 namespace {
+
+using testing::ErrorOf;
+using testing::TestDir;
+using testing::WriteText;
 
 // An Options struct written the way every stage writes one.
 struct ExampleOptions {
@@ -37,14 +43,6 @@ struct ExampleOptions {
   }
 };
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
 
 TEST(Options, JsonSetsFieldsByName) {
   ExampleOptions o;

@@ -1,6 +1,8 @@
 #include "core/ray_caster.h"
 
 #include <gtest/gtest.h>
+
+#include "tests/test_util.h"
 #include <tbb/global_control.h>
 
 #include <cmath>
@@ -16,6 +18,10 @@
 
 namespace crease {
 namespace {
+
+using testing::ErrorOf;
+using testing::TestDir;
+using testing::WriteText;
 
 constexpr double kRadius = 10.0;  // mm
 
@@ -393,14 +399,6 @@ TEST(RayCaster, IsMovable) {
   EXPECT_TRUE(c.Intersect(Ray{Eigen::Vector3f::Zero(), Eigen::Vector3f::UnitX()}).valid());
 }
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
 
 TEST(RayCaster, OptionsAreCheckedAndSettableByName) {
   RayCasterOptions options;

@@ -1,6 +1,8 @@
 #include "core/uv_raster.h"
 
 #include <gtest/gtest.h>
+
+#include "tests/test_util.h"
 #include <tbb/global_control.h>
 
 #include <cmath>
@@ -16,6 +18,10 @@
 
 namespace crease {
 namespace {
+
+using testing::ErrorOf;
+using testing::TestDir;
+using testing::WriteText;
 
 // ---- Independent per-texel reference ---------------------------------------------
 //
@@ -285,14 +291,6 @@ TEST(UvRaster, DeterministicForAnyThreadCount) {
   EXPECT_EQ(one.barycentric, four.barycentric);
 }
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
 
 TEST(UvRaster, ClearErrors) {
   TriMesh no_uv = MakeGrid(2, 2, 1.0, 1.0);

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include "tests/test_util.h"
+
 #include <cmath>
 #include <fstream>
 #include <functional>
@@ -15,36 +17,15 @@
 namespace crease {
 namespace {
 
+using testing::ErrorOf;
+using testing::TestDir;
+using testing::WriteText;
+
 namespace fs = std::filesystem;
 
-fs::path TestDir() {
-  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  const fs::path dir = fs::path(::testing::TempDir()) / "crease_vtk_io_test" /
-                       (std::string(info->test_suite_name()) + "." + info->name());
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
-}
 
-void WriteText(const fs::path& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary);
-  out << text;
-}
 
-std::string ErrorOf(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
 
-#define EXPECT_ERROR_HAS(call, text)                                              \
-  do {                                                                            \
-    const std::string message_ = ErrorOf([&] { call; });                          \
-    EXPECT_NE(message_.find(text), std::string::npos) << "message: " << message_; \
-  } while (false)
 
 TriMesh TestSphere() {
   TriMesh m = MakeUVSphere(10.0 / 3.0, 5, 7);
