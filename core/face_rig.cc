@@ -63,6 +63,11 @@ int FaceRig::ExpressionIndex(const std::string& name) const {
   return it == expression_names.end() ? -1 : static_cast<int>(it - expression_names.begin());
 }
 
+int FaceRig::PartIndex(const std::string& name) const {
+  auto it = std::find(part_names.begin(), part_names.end(), name);
+  return it == part_names.end() ? -1 : static_cast<int>(it - part_names.begin());
+}
+
 int FaceRig::LandmarkIndex(const std::string& name) const {
   for (size_t i = 0; i < landmarks.size(); ++i) {
     if (landmarks[i].name == name) return static_cast<int>(i);
@@ -124,6 +129,14 @@ void FaceRig::Validate(const std::string& what) const {
             fmt::format("{}: region '{}' must be a square 8-bit mask", what, r.name));
   }
   unique(region_names, "region");
+  unique(part_names, "part");
+  Require(vertex_part.empty() || static_cast<int>(vertex_part.size()) == num_vertices(),
+          fmt::format("{}: vertex_part has {} entries for {} vertices", what, vertex_part.size(), num_vertices()));
+  for (size_t v = 0; v < vertex_part.size(); ++v) {
+    Require(vertex_part[v] < part_names.size(),
+            fmt::format("{}: vertex {} is in part {}, but the rig names {} parts", what, v, vertex_part[v],
+                        part_names.size()));
+  }
   Require(original_vertex.empty() || static_cast<int>(original_vertex.size()) == num_vertices(),
           fmt::format("{}: original_vertex has {} entries for {} vertices", what,
                       original_vertex.size(), num_vertices()));
@@ -165,6 +178,7 @@ void WriteRig(const fs::path& path, const FaceRig& rig) {
   json lms = json::array();
   for (const auto& l : rig.landmarks) lms.push_back({{"name", l.name}, {"vertex", l.vertex}});
   header["landmarks"] = lms;
+  header["part_names"] = rig.part_names;
   const int nv = rig.num_vertices(), nf = rig.neutral.num_faces();
   std::vector<ArrayDesc> arrays = {
       {"V", "f64", {nv, 3}},
@@ -172,7 +186,8 @@ void WriteRig(const fs::path& path, const FaceRig& rig) {
       {"UV", "f64", {nv, 2}},
       {"identity_basis", "f32", {rig.identity_basis.cols(), 3LL * nv}},
       {"expression_basis", "f32", {rig.expression_basis.cols(), 3LL * nv}},
-      {"original_vertex", "i32", {static_cast<int64_t>(rig.original_vertex.size())}}};
+      {"original_vertex", "i32", {static_cast<int64_t>(rig.original_vertex.size())}},
+      {"vertex_part", "u8", {static_cast<int64_t>(rig.vertex_part.size())}}};
   for (const auto& r : rig.regions) arrays.push_back({"region:" + r.name, "u8", {r.mask.rows, r.mask.cols}});
   json arr = json::array();
   for (const auto& a : arrays) arr.push_back({{"name", a.name}, {"dtype", a.dtype}, {"shape", a.shape}});
@@ -193,6 +208,7 @@ void WriteRig(const fs::path& path, const FaceRig& rig) {
     WriteRaw(out, rig.identity_basis.data(), rig.identity_basis.size());
     WriteRaw(out, rig.expression_basis.data(), rig.expression_basis.size());
     WriteRaw(out, rig.original_vertex.data(), rig.original_vertex.size());
+    WriteRaw(out, rig.vertex_part.data(), rig.vertex_part.size());
     for (const auto& r : rig.regions) {
       const cv::Mat m = r.mask.isContinuous() ? r.mask : r.mask.clone();
       WriteRaw(out, m.data, m.total());
@@ -238,6 +254,7 @@ FaceRig ReadRig(const fs::path& path) {
     rig.source = header.value("source", "");
     rig.identity_names = header.at("identity_names").get<std::vector<std::string>>();
     rig.expression_names = header.at("expression_names").get<std::vector<std::string>>();
+    if (header.contains("part_names")) rig.part_names = header.at("part_names").get<std::vector<std::string>>();
     for (const auto& l : header.at("landmarks")) {
       rig.landmarks.push_back({l.at("name").get<std::string>(), l.at("vertex").get<int>()});
     }
@@ -284,6 +301,11 @@ FaceRig ReadRig(const fs::path& path) {
         dtype("i32");
         rig.original_vertex.resize(d.shape[0]);
         std::memcpy(rig.original_vertex.data(), p, d.bytes());
+      } else if (d.name == "vertex_part") {
+        dims(1);
+        dtype("u8");
+        rig.vertex_part.resize(d.shape[0]);
+        std::memcpy(rig.vertex_part.data(), p, d.bytes());
       } else if (d.name.rfind("region:", 0) == 0) {
         dims(2);
         dtype("u8");

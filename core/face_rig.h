@@ -52,9 +52,18 @@ struct FaceRig {
   // Per vertex, the vertex id in the file(s) it was imported from (seam splits map
   // several vertices to one id); empty for rigs made by crease.
   std::vector<int> original_vertex;
+  // Optional parts of a full head (e.g. "face", "cranium", "eyeball_left",
+  // "mouth_cavity"): part_names[vertex_part[v]] is vertex v's part. Empty = all
+  // one part. The face region is the part of the UV layout inside [0,1]²; other
+  // parts may carry UVs outside it, which UV-space stages (texture, displacement
+  // maps) ignore.
+  std::vector<std::string> part_names;
+  std::vector<uint8_t> vertex_part;
   std::string source;  // free text: where the rig came from
 
   int num_vertices() const { return neutral.num_vertices(); }
+  // -1 when absent.
+  int PartIndex(const std::string& name) const;
   int num_identity() const { return static_cast<int>(identity_basis.cols()); }
   int num_expressions() const { return static_cast<int>(expression_basis.cols()); }
 

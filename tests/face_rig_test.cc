@@ -36,6 +36,9 @@ FaceRig SmallRig() {
   cv::Mat m = cv::Mat::zeros(32, 32, CV_8UC1);
   m(cv::Rect(0, 0, 16, 8)) = 255;
   rig.regions = {{"forehead", m}};
+  rig.part_names = {"face", "eyeball_left"};
+  rig.vertex_part.assign(rig.num_vertices(), 0);
+  rig.vertex_part[3] = 1;
   return rig;
 }
 
@@ -78,6 +81,9 @@ TEST(FaceRig, FileRoundTripIsExact) {
   EXPECT_EQ(back.expression_names, rig.expression_names);
   ASSERT_EQ(back.landmarks.size(), 2u);
   EXPECT_EQ(back.landmarks[0].vertex, 5);
+  EXPECT_EQ(back.part_names, rig.part_names);
+  EXPECT_EQ(back.vertex_part, rig.vertex_part);
+  EXPECT_EQ(back.PartIndex("eyeball_left"), 1);
   ASSERT_EQ(back.regions.size(), 1u);
   EXPECT_EQ(cv::norm(back.regions[0].mask, rig.regions[0].mask, cv::NORM_INF), 0.0);
 }
