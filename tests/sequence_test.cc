@@ -1,0 +1,118 @@
+#include "synth/sequence.h"
+
+#include <gtest/gtest.h>
+
+#include "core/face_rig.h"
+#include "core/mesh_primitives.h"
+#include "tests/test_util.h"
+
+namespace crease {
+namespace {
+
+using testing::ErrorOf;
+
+TEST(Sequence, PresetsAreValidAndDoWhatTheySay) {
+  for (const auto& name : SequencePresetNames()) {
+    const Sequence s = MakePresetSequence(name);
+    EXPECT_NO_THROW(s.Validate(name));
+    EXPECT_GT(s.num_frames(), 60) << name;
+    EXPECT_EQ(s.fps, 30.0);
+  }
+  // wrinkle-workout: a full brow raise, starting and ending neutral.
+  const Sequence w = MakePresetSequence("wrinkle-workout");
+  double peak = 0;
+  for (int i = 0; i < w.num_frames(); ++i) peak = std::max(peak, w.Frame(i).expression["browInnerUp"]);
+  EXPECT_EQ(peak, 1.0);
+  EXPECT_EQ(w.Frame(0).expression["browInnerUp"], 0.0);
+  EXPECT_EQ(w.Frame(w.num_frames() - 1).expression["jawOpen"], 0.0);
+  // moving-light: from the front (elevation 0) to above (80), monotonically, expression held.
+  const Sequence m = MakePresetSequence("moving-light");
+  double last = -1;
+  for (int i = m.num_frames() / 10 + 3; i < m.num_frames(); ++i) {
+    const SequenceFrame f = m.Frame(i);
+    EXPECT_GE(f.light_elevation_deg, last);
+    last = f.light_elevation_deg;
+    EXPECT_EQ(f.expression.at("browInnerUp"), 1.0);
+  }
+  EXPECT_NEAR(last, 80.0, 1e-9);
+  EXPECT_TRUE(MakePresetSequence("fast-motion").motion_blur);
+  // occlusion: the occluder crosses the face (x changes sign).
+  const Sequence o = MakePresetSequence("occlusion");
+  EXPECT_TRUE(o.Frame(0).has_occluder);
+  EXPECT_GT(o.Frame(0).occluder_x_mm, 0);
+  EXPECT_LT(o.Frame(o.num_frames() - 1).occluder_x_mm, 0);
+  // Same preset, same values: presets are deterministic.
+  EXPECT_EQ(MakePresetSequence("talking").Frame(37).expression, MakePresetSequence("talking").Frame(37).expression);
+  EXPECT_NE(ErrorOf([] { MakePresetSequence("dancing"); }).find("unknown sequence preset 'dancing'"),
+            std::string::npos);
+}
+
+TEST(Sequence, InterpolationHitsKeysAndStaysBetweenThem) {
+  Sequence s;
+  s.keys = {{0.0, {{"expression:a", 0.0}, {"pose:yaw_deg", -10}}},
+            {1.0, {{"expression:a", 1.0}}},
+            {2.0, {{"expression:a", 0.2}, {"pose:yaw_deg", 10}}}};
+  s.duration_s = 3.0;
+  for (const char* mode : {"linear", "smooth", "catmull-rom"}) {
+    s.interpolation = mode;
+    s.Validate("s");
+    EXPECT_DOUBLE_EQ(s.At(1.0).expression["a"], 1.0) << mode;
+    EXPECT_DOUBLE_EQ(s.At(2.5).expression["a"], 0.2) << mode;  // held after the last key
+    // Channels are independent: yaw has keys at 0 and 2 only.
+    EXPECT_NEAR(s.At(1.0).yaw_deg, 0.0, 1e-12) << mode;
+  }
+  s.interpolation = "linear";
+  EXPECT_DOUBLE_EQ(s.At(0.25).expression["a"], 0.25);
+  s.interpolation = "smooth";
+  for (double t = 0; t <= 1.0; t += 0.01) {
+    const double v = s.At(t).expression["a"];
+    EXPECT_GE(v, 0.0);
+    EXPECT_LE(v, 1.0);
+  }
+  EXPECT_EQ(s.num_frames(), 91);
+  EXPECT_NE(ErrorOf([&] { s.Frame(91); }).find("out of range"), std::string::npos);
+}
+
+TEST(Sequence, YamlRoundTripAndErrors) {
+  const Sequence a = MakePresetSequence("talking", 2.0);
+  const Sequence b = ParseSequenceYaml(SequenceToYaml(a), "rt.yaml");
+  ASSERT_EQ(a.keys.size(), b.keys.size());
+  for (size_t i = 0; i < a.keys.size(); ++i) {
+    EXPECT_EQ(a.keys[i].t, b.keys[i].t);
+    EXPECT_EQ(a.keys[i].values, b.keys[i].values);
+  }
+  EXPECT_EQ(a.interpolation, b.interpolation);
+  EXPECT_EQ(a.duration_s, b.duration_s);
+
+  const std::string ok = "name: x\nkeys:\n  - t: 0\n    expression: {jawOpen: 0}\n  - t: 1\n    expression: {jawOpen: 1}\n";
+  EXPECT_EQ(ParseSequenceYaml(ok, "ok.yaml").num_frames(), 31);
+  EXPECT_NE(ErrorOf([] { ParseSequenceYaml("keys: [", "m.yaml"); }).find("m.yaml: malformed YAML"), std::string::npos);
+  EXPECT_NE(ErrorOf([] { ParseSequenceYaml("keys:\n  - t: 0\n    pose: {yawn: 3}\n", "p.yaml"); })
+                .find("p.yaml: keys[0].pose: unknown field 'yawn'"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] { ParseSequenceYaml("keys:\n  - t: 1\n  - t: 0.5\n", "t.yaml"); }).find("key 1: times must increase"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] { ParseSequenceYaml("keys:\n  - t: 0\n    expression: {a: lots}\n", "n.yaml"); })
+                .find("n.yaml: keys[0].expression.a: expected a number"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] { ParseSequenceYaml("frames: 3\nkeys:\n  - t: 0\n", "f.yaml"); }).find("unknown field 'frames'"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] { ParseSequenceYaml("keys: []\n", "e.yaml"); }).find("non-empty list"), std::string::npos);
+}
+
+TEST(Sequence, ExpressionNamesResolveOntoLeftRightPairs) {
+  FaceRig rig;
+  rig.neutral = MakeGrid(1, 1, 1, 1);
+  rig.expression_basis = Eigen::MatrixXf::Zero(12, 3);
+  rig.expression_names = {"jawOpen", "mouthSmile_L", "mouthSmile_R"};
+  rig.identity_basis.resize(12, 0);
+  SequenceFrame f;
+  f.expression = {{"jawOpen", 0.5}, {"mouthSmile", 0.8}};
+  EXPECT_EQ(ExpressionWeightsForRig(f, rig), (std::vector<double>{0.5, 0.8, 0.8}));
+  f.expression = {{"browDown", 1.0}};
+  EXPECT_NE(ErrorOf([&] { ExpressionWeightsForRig(f, rig); }).find("expression 'browDown', which the rig lacks"),
+            std::string::npos);
+}
+
+}  // namespace
+}  // namespace crease
