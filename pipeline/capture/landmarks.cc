@@ -1,0 +1,166 @@
+#include "pipeline/capture/landmarks.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fmt/format.h>
+#include <opencv2/imgproc.hpp>
+
+#include <dlib/image_processing.h>
+#include <dlib/image_processing/frontal_face_detector.h>
+#include <dlib/opencv/cv_image.h>
+
+#include "core/error.h"
+
+namespace crease {
+
+void DlibLandmarkOptions::VisitFields(OptionVisitor& v) {
+  v.Field("model_path", model_path);
+  v.Field("upsample", upsample);
+  v.Field("detection_threshold", detection_threshold);
+  v.Field("max_scale_change", max_scale_change);
+}
+
+void DlibLandmarkOptions::Check() const {
+  CheckGe("DlibLandmarkOptions", "upsample", upsample, 0);
+  CheckLe("DlibLandmarkOptions", "upsample", upsample, 3);
+  CheckGt("DlibLandmarkOptions", "max_scale_change", max_scale_change, 1.0);
+}
+
+cv::Mat ToGray8(const cv::Mat& image) {
+  Require(!image.empty(), "ToGray8: empty image");
+  cv::Mat gray;
+  if (image.channels() == 3) {
+    cv::cvtColor(image, gray, cv::COLOR_RGB2GRAY);
+  } else if (image.channels() == 1) {
+    gray = image;
+  } else {
+    throw Error(fmt::format("ToGray8: images must have 1 or 3 channels, not {}", image.channels()));
+  }
+  if (gray.depth() == CV_8U) return gray.clone();
+  cv::Mat f;
+  gray.convertTo(f, CV_32F);
+  cv::Mat out(f.size(), CV_8UC1);
+  for (int y = 0; y < f.rows; ++y) {
+    const float* src = f.ptr<float>(y);
+    uint8_t* dst = out.ptr<uint8_t>(y);
+    for (int x = 0; x < f.cols; ++x) {
+      float v = std::clamp(std::isfinite(src[x]) ? src[x] : 0.0f, 0.0f, 1.0f);
+      v = v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;  // sRGB
+      dst[x] = static_cast<uint8_t>(std::lround(v * 255.0f));
+    }
+  }
+  return out;
+}
+
+FaceBox BoxOfPoints(const MatX2d& points, double scale) {
+  FaceBox b;
+  if (points.rows() == 0) return b;
+  const Eigen::Vector2d lo = points.colwise().minCoeff(), hi = points.colwise().maxCoeff();
+  const Eigen::Vector2d c = 0.5 * (lo + hi), half = 0.5 * scale * (hi - lo);
+  b.x = c.x() - half.x();
+  b.y = c.y() - half.y();
+  b.width = 2 * half.x();
+  b.height = 2 * half.y();
+  return b;
+}
+
+struct DlibLandmarkSource::Impl {
+  DlibLandmarkOptions options;
+  dlib::frontal_face_detector detector = dlib::get_frontal_face_detector();
+  dlib::shape_predictor predictor;
+  MatX2d previous;  // last frame's landmarks (empty after a loss)
+};
+
+DlibLandmarkSource::DlibLandmarkSource(const DlibLandmarkOptions& options) : impl_(std::make_unique<Impl>()) {
+  options.Check();
+  impl_->options = options;
+  if (!std::filesystem::exists(options.model_path)) {
+    throw Error(fmt::format("{}: dlib's 68-point landmark model is missing (install the Debian package "
+                            "libdlib-data, or set model_path)", options.model_path));
+  }
+  try {
+    dlib::deserialize(options.model_path) >> impl_->predictor;
+  } catch (const std::exception& e) {
+    throw Error(fmt::format("{}: cannot load dlib's shape predictor: {}", options.model_path, e.what()));
+  }
+}
+
+DlibLandmarkSource::~DlibLandmarkSource() = default;
+
+void DlibLandmarkSource::Reset() { impl_->previous.resize(0, 2); }
+
+std::vector<FaceBox> DlibLandmarkSource::Detect(const cv::Mat& image) const {
+  const cv::Mat gray = ToGray8(image);
+  dlib::cv_image<unsigned char> img(gray);
+  std::vector<dlib::rect_detection> dets;
+  // pyramid_up via the detector's own upsampling is not exposed for cv_image; scale instead.
+  if (impl_->options.upsample > 0) {
+    cv::Mat up;
+    const double s = std::pow(2.0, impl_->options.upsample);
+    cv::resize(gray, up, cv::Size(), s, s, cv::INTER_LINEAR);
+    dlib::cv_image<unsigned char> up_img(up);
+    impl_->detector(up_img, dets, impl_->options.detection_threshold);
+    for (auto& d : dets) {
+      d.rect = dlib::rectangle(static_cast<long>(d.rect.left() / s), static_cast<long>(d.rect.top() / s),
+                               static_cast<long>(d.rect.right() / s), static_cast<long>(d.rect.bottom() / s));
+    }
+  } else {
+    impl_->detector(img, dets, impl_->options.detection_threshold);
+  }
+  std::sort(dets.begin(), dets.end(), [](const auto& a, const auto& b) { return a.detection_confidence > b.detection_confidence; });
+  std::vector<FaceBox> out;
+  for (const auto& d : dets) {
+    out.push_back({static_cast<double>(d.rect.left()), static_cast<double>(d.rect.top()),
+                   static_cast<double>(d.rect.width()), static_cast<double>(d.rect.height()), d.detection_confidence});
+  }
+  return out;
+}
+
+MatX2d DlibLandmarkSource::Landmarks(const cv::Mat& image, const FaceBox& box) const {
+  const cv::Mat gray = ToGray8(image);
+  dlib::cv_image<unsigned char> img(gray);
+  const dlib::rectangle rect(std::lround(box.x), std::lround(box.y), std::lround(box.x + box.width - 1),
+                             std::lround(box.y + box.height - 1));
+  const dlib::full_object_detection shape = impl_->predictor(img, rect);
+  Require(shape.num_parts() == 68, fmt::format("dlib's model gave {} landmarks, expected 68", shape.num_parts()));
+  MatX2d p(68, 2);
+  for (int i = 0; i < 68; ++i) p.row(i) << shape.part(i).x(), shape.part(i).y();
+  return p;
+}
+
+LandmarkResult DlibLandmarkSource::Track(const cv::Mat& image) {
+  LandmarkResult r;
+  Impl& m = *impl_;
+  if (m.previous.rows() == 68) {
+    // dlib's predictor expects its detector's box: roughly the landmarks' box of
+    // the previous frame, slightly enlarged and shifted down (brows are near the top).
+    FaceBox box = BoxOfPoints(m.previous, 1.0);
+    const double size = std::max(box.width, box.height);
+    FaceBox guess{box.x + 0.5 * box.width - 0.5 * size, box.y + 0.5 * box.height - 0.5 * size + 0.02 * size, size,
+                  size, 0.0};
+    const MatX2d p = Landmarks(image, guess);
+    const FaceBox nb = BoxOfPoints(p);
+    const double ratio = std::max(nb.width, nb.height) / std::max(1e-6, size);
+    const bool inside = nb.x >= -0.25 * nb.width && nb.y >= -0.25 * nb.height &&
+                        nb.x + nb.width <= image.cols + 0.25 * nb.width && nb.y + nb.height <= image.rows + 0.25 * nb.height;
+    if (ratio < m.options.max_scale_change && ratio > 1.0 / m.options.max_scale_change && inside) {
+      r.found = true;
+      r.box = guess;
+      r.points = p;
+      m.previous = p;
+      return r;
+    }
+    m.previous.resize(0, 2);  // lost: detect below
+  }
+  r.detected = true;
+  const std::vector<FaceBox> faces = Detect(image);
+  if (faces.empty()) return r;
+  r.found = true;
+  r.box = faces.front();
+  r.points = Landmarks(image, r.box);
+  m.previous = r.points;
+  return r;
+}
+
+}  // namespace crease
