@@ -98,10 +98,11 @@ def ibug68():
         p.append((0.5, 0.40 + 0.06 * k))
     for k in range(5):  # nose bottom, 32..36
         p.append((0.44 + 0.03 * k, 0.6 + 0.015 * np.sin(np.pi * k / 4)))
-    for cx, order in ((0.33, "R"), (0.67, "L")):  # eyes 37..42, 43..48
+    # Eyes 37..42 (subject's right: outer corner first) and 43..48 (subject's left:
+    # inner corner first); both start at the image-left corner and go over the top.
+    for cx in (0.33, 0.67):
         for a in (np.pi, 2 * np.pi / 3, np.pi / 3, 0, -np.pi / 3, -2 * np.pi / 3):
-            aa = a if order == "R" else np.pi - a
-            p.append((cx + 0.06 * np.cos(aa), 0.40 - 0.02 * np.sin(aa)))
+            p.append((cx + 0.06 * np.cos(a), 0.40 - 0.02 * np.sin(a)))
     for k in range(12):  # outer lip, 49..60
         a = np.pi - 2 * np.pi * k / 12
         p.append((0.5 + 0.1 * np.cos(a), 0.75 - 0.04 * np.sin(a)))

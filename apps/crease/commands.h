@@ -10,5 +10,8 @@ namespace crease::app {
 void AddVersionCommand(CLI::App& app);
 void AddMeshCommands(CLI::App& app);
 void AddRigCommands(CLI::App& app);
+void AddSynthCommands(CLI::App& app);
+// Adds actor, render, sequence, scans, mesh and check to the "synth" subcommand.
+void AddSynthDatasetCommands(CLI::App& app);
 
 }  // namespace crease::app

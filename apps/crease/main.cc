@@ -15,6 +15,8 @@ int main(int argc, char** argv) {
   crease::app::AddVersionCommand(app);
   crease::app::AddMeshCommands(app);
   crease::app::AddRigCommands(app);
+  crease::app::AddSynthCommands(app);
+  crease::app::AddSynthDatasetCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

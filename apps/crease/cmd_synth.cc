@@ -1,0 +1,110 @@
+// crease synth rig — the studio's procedural head rig (synth/procedural_rig.h).
+#include <cstdio>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+#include "apps/crease/commands.h"
+#include "core/error.h"
+#include "core/face_rig.h"
+#include "core/image_io.h"
+#include "core/preview_render.h"
+#include "synth/procedural_rig.h"
+
+namespace crease::app {
+
+namespace {
+
+// "KEY=VALUE" pairs → a JSON object; VALUE is parsed as JSON (numbers, booleans,
+// lists) and otherwise taken as a string.
+std::string SetPairsToJson(const std::vector<std::string>& pairs) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& p : pairs) {
+    const auto eq = p.find('=');
+    if (eq == std::string::npos || eq == 0) throw Error(fmt::format("--set '{}': expected KEY=VALUE", p));
+    const std::string value = p.substr(eq + 1);
+    nlohmann::json v = nlohmann::json::parse(value, nullptr, /*allow_exceptions=*/false);
+    if (v.is_discarded()) v = value;
+    j[p.substr(0, eq)] = v;
+  }
+  return j.dump();
+}
+
+// A contact sheet of the rig: neutral from the front, three-quarter and side, and
+// a few expressions, each tile `tile` pixels square, coloured by part.
+cv::Mat RigContactSheet(const FaceRig& rig, int tile) {
+  struct View {
+    double azimuth;
+    std::vector<std::pair<std::string, double>> weights;
+  };
+  const std::vector<View> views = {
+      {0.0, {}},
+      {35.0, {}},
+      {90.0, {}},
+      {0.0, {{"mouthSmile_L", 1.0}, {"mouthSmile_R", 1.0}, {"cheekSquint_L", 0.6}, {"cheekSquint_R", 0.6}}},
+      {30.0, {{"jawOpen", 0.8}, {"browInnerUp_L", 1.0}, {"browInnerUp_R", 1.0}, {"browOuterUp_L", 0.6},
+              {"browOuterUp_R", 0.6}}},
+      {-20.0, {{"eyeBlink_L", 1.0}, {"eyeSquint_R", 1.0}, {"browDown_L", 1.0}, {"browDown_R", 1.0},
+               {"noseSneer_L", 0.8}, {"noseSneer_R", 0.8}, {"mouthFrown_L", 0.7}, {"mouthFrown_R", 0.7}}},
+  };
+  const MatX3d colors = ProceduralRigPreviewColors(rig);
+  const int cols = 3, rows = static_cast<int>((views.size() + cols - 1) / cols);
+  cv::Mat sheet(rows * tile, cols * tile, CV_32FC3, cv::Scalar(0, 0, 0));
+  for (size_t i = 0; i < views.size(); ++i) {
+    Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.num_expressions());
+    for (const auto& [name, value] : views[i].weights) {
+      const int e = rig.ExpressionIndex(name);
+      if (e >= 0) w[e] = value;
+    }
+    PreviewRenderOptions o;
+    o.width = o.height = tile;
+    o.azimuth_deg = views[i].azimuth;
+    o.elevation_deg = 5.0;
+    o.margin = 0.72;
+    o.key_light_dir = {-0.4, 0.5, 0.9};
+    const PreviewRender r = RenderPreview(rig.Evaluate({}, w), o, colors);
+    r.image.copyTo(sheet(cv::Rect(static_cast<int>(i % cols) * tile, static_cast<int>(i / cols) * tile, tile, tile)));
+  }
+  return sheet;
+}
+
+}  // namespace
+
+void AddSynthCommands(CLI::App& app) {
+  auto* synth = app.add_subcommand("synth", "The synthetic face studio: procedural rig, actors, renders");
+  synth->require_subcommand(1);
+
+  // synth rig
+  {
+    auto* cmd = synth->add_subcommand("rig", "Build the studio's procedural head rig (.crig)");
+    static std::string out, preview;
+    static std::vector<std::string> sets;
+    static int preview_tile = 512;
+    cmd->add_option("--out,-o", out, "Output rig file (.crig)")->required();
+    cmd->add_option("--set", sets, "Rig option KEY=VALUE (repeatable), e.g. face_columns=72");
+    cmd->add_option("--preview", preview, "Also write a contact sheet of renders (neutral and expressions)");
+    cmd->add_option("--preview-tile", preview_tile, "Preview tile size, pixels")->capture_default_str();
+    cmd->callback([] {
+      ProceduralRigOptions opt;
+      if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &opt);
+      const FaceRig rig = BuildProceduralRig(opt);
+      WriteRig(out, rig);
+      const ChartDistortion d = MeasureFaceChartDistortion(rig);
+      std::printf("wrote %s: %d vertices, %d triangles, %d identity modes, %d expressions, %zu landmarks, "
+                  "%zu regions\n",
+                  out.c_str(), rig.num_vertices(), rig.neutral.num_faces(), rig.num_identity(),
+                  rig.num_expressions(), rig.landmarks.size(), rig.regions.size());
+      std::printf("face UV chart: %d triangles, area ratio p05/p50/p95 %.3f/%.3f/%.3f (min %.3f, max %.3f), "
+                  "conformal distortion mean %.3f p95 %.3f, %d flipped\n",
+                  d.triangles, d.area_ratio_p05, d.area_ratio_p50, d.area_ratio_p95, d.area_ratio_min,
+                  d.area_ratio_max, d.conformal_mean, d.conformal_p95, d.flipped);
+      if (!preview.empty()) {
+        if (preview_tile < 64 || preview_tile > 4096) throw Error("--preview-tile must be in [64, 4096]");
+        WriteImage(preview, RigContactSheet(rig, preview_tile));
+        std::printf("wrote %s\n", preview.c_str());
+      }
+    });
+  }
+}
+
+}  // namespace crease::app

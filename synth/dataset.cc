@@ -1,0 +1,313 @@
+#include "synth/dataset.h"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <numbers>
+#include <fstream>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/file_util.h"
+#include "core/image_io.h"
+#include "core/json_io.h"
+#include "core/mesh_io.h"
+#include "core/progress.h"
+
+namespace crease {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+// Writes a folder under a temporary name and renames it into place when `fill` succeeds.
+void WriteFolderAtomic(const fs::path& out, bool overwrite, const std::function<void(const fs::path&)>& fill) {
+  std::error_code ec;
+  if (fs::exists(out, ec) && !overwrite) {
+    throw Error(fmt::format("{}: already exists (choose another --out, or pass --overwrite)", out.string()));
+  }
+  const fs::path parent = out.has_parent_path() ? out.parent_path() : fs::path(".");
+  fs::create_directories(parent, ec);
+  const fs::path tmp = parent / fmt::format(".{}.tmp-{}", out.filename().string(), ::getpid());
+  fs::remove_all(tmp, ec);
+  fs::create_directories(tmp, ec);
+  if (ec) throw Error(fmt::format("{}: cannot create folder: {}", tmp.string(), ec.message()));
+  try {
+    fill(tmp);
+  } catch (...) {
+    fs::remove_all(tmp, ec);
+    throw;
+  }
+  if (fs::exists(out)) fs::remove_all(out);
+  fs::rename(tmp, out, ec);
+  if (ec) throw Error(fmt::format("{}: cannot move the finished folder into place: {}", out.string(), ec.message()));
+}
+
+json RigidToJson(const Rigid3d& r) {
+  const auto& q = r.rotation;
+  return {{"rotation_wxyz", {q.w(), q.x(), q.y(), q.z()}},
+          {"translation_mm", {r.translation.x(), r.translation.y(), r.translation.z()}}};
+}
+
+json TruthToJson(const StudioFrameTruth& t, const FaceRig& rig, const Actor& actor) {
+  json j;
+  j["frame"] = t.index;
+  j["time_s"] = t.time_s;
+  json expr = json::object();
+  for (int i = 0; i < t.expression.size(); ++i) expr[rig.expression_names[i]] = t.expression[i];
+  j["expression"] = expr;
+  j["identity"] = std::vector<double>(actor.identity.data(), actor.identity.data() + actor.identity.size());
+  j["pose"] = {{"yaw_deg", t.yaw_deg}, {"pitch_deg", t.pitch_deg}, {"roll_deg", t.roll_deg},
+               {"translation_mm", {t.translation_mm.x(), t.translation_mm.y(), t.translation_mm.z()}}};
+  j["cam_from_head"] = RigidToJson(t.cam_from_head);
+  j["light"] = t.light_description;
+  json lms = json::array();
+  for (size_t i = 0; i < rig.landmarks.size(); ++i) {
+    lms.push_back({{"name", rig.landmarks[i].name},
+                   {"vertex", rig.landmarks[i].vertex},
+                   {"x", t.landmark_pixels(static_cast<int>(i), 0)},
+                   {"y", t.landmark_pixels(static_cast<int>(i), 1)},
+                   {"visible", t.landmark_visible[i] != 0}});
+  }
+  j["landmarks"] = lms;
+  return j;
+}
+
+void WriteVertexTruth(const fs::path& path, const StudioFrameTruth& t) {
+  WriteFileAtomic(path, [&](std::ostream& out) {
+    std::vector<float> buf(static_cast<size_t>(t.vertex_pixels.rows()) * 3);
+    for (Eigen::Index v = 0; v < t.vertex_pixels.rows(); ++v) {
+      buf[3 * v] = static_cast<float>(t.vertex_pixels(v, 0));
+      buf[3 * v + 1] = static_cast<float>(t.vertex_pixels(v, 1));
+      buf[3 * v + 2] = t.vertex_visible[v] ? 1.0f : 0.0f;
+    }
+    out.write(reinterpret_cast<const char*>(buf.data()), static_cast<std::streamsize>(buf.size() * sizeof(float)));
+  });
+}
+
+std::string FrameName(int i) { return fmt::format("{:06d}", i); }
+
+}  // namespace
+
+Eigen::VectorXd ParseExpressionSpec(const std::string& spec, const FaceRig& rig) {
+  SequenceFrame f;
+  size_t start = 0;
+  while (start < spec.size()) {
+    size_t end = spec.find(',', start);
+    if (end == std::string::npos) end = spec.size();
+    const std::string item = spec.substr(start, end - start);
+    start = end + 1;
+    if (item.empty()) continue;
+    const size_t eq = item.find('=');
+    Require(eq != std::string::npos, fmt::format("expression '{}': expected NAME=WEIGHT", item));
+    try {
+      size_t used = 0;
+      const double w = std::stod(item.substr(eq + 1), &used);
+      Require(used == item.size() - eq - 1 && std::isfinite(w), "");
+      f.expression[item.substr(0, eq)] = w;
+    } catch (const std::exception&) {
+      throw Error(fmt::format("expression '{}': '{}' is not a number", item, item.substr(eq + 1)));
+    }
+  }
+  const std::vector<double> w = ExpressionWeightsForRig(f, rig);
+  return Eigen::Map<const Eigen::VectorXd>(w.data(), static_cast<Eigen::Index>(w.size()));
+}
+
+DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const Sequence& input_sequence,
+                                   const SequenceDatasetOptions& options, const fs::path& out) {
+  input_sequence.Validate(input_sequence.name);
+  options.studio.Check();
+  DatasetReport report;
+  Sequence sequence = input_sequence;
+  if (options.ignore_missing_expressions) {
+    for (const auto& name : sequence.ExpressionNames()) {
+      SequenceFrame probe;
+      probe.expression[name] = 0.0;
+      try {
+        ExpressionWeightsForRig(probe, rig);
+      } catch (const Error&) {
+        report.warnings.push_back(fmt::format("the rig has no expression '{}' (nor '{}_L'/'{}_R'): its channel is dropped",
+                                              name, name, name));
+        for (auto& k : sequence.keys) k.values.erase("expression:" + name);
+      }
+    }
+  }
+  // Fail before rendering anything when the sequence names expressions the rig lacks.
+  for (const auto& name : sequence.ExpressionNames()) {
+    SequenceFrame probe;
+    probe.expression[name] = 0.0;
+    ExpressionWeightsForRig(probe, rig);
+  }
+  const int first = options.first_frame;
+  const int count = options.max_frames < 0 ? sequence.num_frames() - first
+                                           : std::min(options.max_frames, sequence.num_frames() - first);
+  Require(first >= 0 && count > 0, fmt::format("frame range starting at {} is empty (the sequence has {} frames)",
+                                               first, sequence.num_frames()));
+  report.path = out.string();
+  const auto start = std::chrono::steady_clock::now();
+  WriteFolderAtomic(out, options.overwrite, [&](const fs::path& dir) {
+    const Studio studio(rig, actor, options.studio);
+    WriteRig(dir / "rig.crig", rig);
+    WriteActor(dir / "actor.json", actor);
+    WriteFileAtomic(dir / "sequence.yaml", [&](std::ostream& o) { o << SequenceToYaml(sequence); });
+    WriteCamera(dir / "camera.json", Camera(studio.camera().intrinsics, studio.camera().cam_from_head));
+    fs::create_directories(dir / "frames");
+    fs::create_directories(dir / "truth");
+    fs::create_directories(dir / "maps");
+    WriteImage(dir / "maps" / "static_displacement.exr", studio.model().static_displacement());
+    WriteImage(dir / "maps" / "mesoscopic_displacement.exr", studio.model().mesoscopic_displacement());
+    WriteImage(dir / "maps" / "albedo.exr", studio.model().skin().albedo, {.half = true});
+    WriteImage(dir / "maps" / "specular.exr", studio.model().skin().specular, {.half = true});
+    WriteImage(dir / "maps" / "roughness.exr", studio.model().skin().roughness, {.half = true});
+    Progress progress("rendering " + sequence.name, count);
+    for (int i = first; i < first + count; ++i) {
+      const StudioFrame frame = studio.RenderFrame(sequence, i);
+      report.render_seconds += frame.render.stats.seconds;
+      report.surface_seconds += frame.actor.seconds;
+      cv::Mat srgb;
+      frame.image.srgb8.convertTo(srgb, CV_8U);
+      WriteImage(dir / "frames" / (FrameName(i) + ".png"), srgb, {.srgb = false});
+      if (options.write_exr) WriteImage(dir / "frames" / (FrameName(i) + ".exr"), frame.render.image);
+      WriteJsonFile(dir / "truth" / (FrameName(i) + ".json"), TruthToJson(frame.truth, rig, actor));
+      WriteVertexTruth(dir / "truth" / (FrameName(i) + "_vertices.bin"), frame.truth);
+      if (options.write_maps) {
+        WriteImage(dir / "maps" / (FrameName(i) + "_expression_displacement.exr"), frame.actor.expression_displacement);
+      }
+      ++report.frames;
+      progress.Advance();
+    }
+    json ds;
+    ds["format"] = "crease synthetic sequence";
+    ds["version"] = 1;
+    ds["sequence"] = sequence.name;
+    ds["first_frame"] = first;
+    ds["frames"] = count;
+    ds["fps"] = sequence.fps;
+    ds["width"] = options.studio.width;
+    ds["height"] = options.studio.height;
+    ds["rig"] = "rig.crig";
+    ds["actor"] = "actor.json";
+    ds["camera"] = "camera.json";
+    ds["studio"] = json::parse(OptionsToJson(options.studio));
+    ds["files"] = {
+        {"frame", "frames/{frame:06d}.png"},
+        {"frame_linear", options.write_exr ? "frames/{frame:06d}.exr" : ""},
+        {"truth", "truth/{frame:06d}.json"},
+        {"vertex_truth", "truth/{frame:06d}_vertices.bin (float32 x, y, visible per coarse vertex)"},
+        {"expression_displacement", options.write_maps ? "maps/{frame:06d}_expression_displacement.exr" : ""},
+        {"static_displacement", "maps/static_displacement.exr"},
+        {"mesoscopic_displacement", "maps/mesoscopic_displacement.exr"}};
+    ds["units"] = "mm; images linear float in EXR, sRGB 8-bit in PNG; UV v grows downwards";
+    WriteJsonFile(dir / "dataset.json", ds);
+  });
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return report;
+}
+
+DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& actor_seeds,
+                           const ActorOptions& actor_options, const ScanSetOptions& options, const fs::path& out) {
+  options.studio.Check();
+  Require(!actor_seeds.empty(), "scan set: no actors");
+  Require(options.cameras >= 1, "ScanSetOptions.cameras must be >= 1");
+  for (const auto& l : options.light_rigs) MakeLightRig(l);
+  std::vector<Eigen::VectorXd> expressions = {Eigen::VectorXd::Zero(rig.num_expressions())};
+  std::vector<std::string> names = {"neutral"};
+  for (const auto& spec : options.expressions) {
+    expressions.push_back(ParseExpressionSpec(spec, rig));
+    std::string name = spec.substr(0, spec.find('='));
+    names.push_back(fmt::format("{:02d}_{}", names.size(), name));
+  }
+  DatasetReport report;
+  report.path = out.string();
+  const auto start = std::chrono::steady_clock::now();
+  WriteFolderAtomic(out, options.overwrite, [&](const fs::path& dir) {
+    WriteRig(dir / "rig.crig", rig);
+    json index;
+    index["format"] = "crease synthetic scan set";
+    index["version"] = 1;
+    index["rig"] = "rig.crig";
+    index["light_rigs"] = options.light_rigs;
+    index["cameras"] = options.cameras;
+    json actors = json::array();
+    Progress progress("scanning", static_cast<int64_t>(actor_seeds.size() * expressions.size()));
+    for (size_t a = 0; a < actor_seeds.size(); ++a) {
+      const Actor actor = GenerateActor(rig, actor_seeds[a], actor_options);
+      const Studio studio(rig, actor, options.studio);
+      const fs::path adir = dir / fmt::format("actor_{:03d}", a);
+      fs::create_directories(adir);
+      WriteActor(adir / "actor.json", actor);
+      json scans = json::array();
+      for (size_t e = 0; e < expressions.size(); ++e) {
+        const fs::path sdir = adir / names[e];
+        fs::create_directories(sdir);
+        json cams = json::array();
+        bool mesh_written = false;
+        for (int c = 0; c < options.cameras; ++c) {
+          const double az = options.cameras == 1 ? 0.0
+                                                 : -0.5 * options.camera_arc_deg + options.camera_arc_deg * c / (options.cameras - 1);
+          // Cameras on an arc about the face centre, all looking at it.
+          const Camera& front = studio.camera();
+          const Eigen::Vector3d centre_in_head = front.cam_from_head.Inverse() * Eigen::Vector3d(0, 0, options.studio.distance_mm);
+          const double r = az * std::numbers::pi / 180.0;
+          const Eigen::Vector3d eye = centre_in_head + options.studio.distance_mm * Eigen::Vector3d(std::sin(r), 0, std::cos(r));
+          const Camera cam = LookAtCamera(front.intrinsics, eye, centre_in_head, Eigen::Vector3d::UnitY());
+          WriteCamera(sdir / fmt::format("cam{}.json", c), cam);
+          cams.push_back(fmt::format("cam{}.json", c));
+          for (const auto& light_name : options.light_rigs) {
+            const LightRig lights = MakeLightRig(light_name);
+            const StudioFrame f = studio.RenderStill(expressions[e], SequenceFrame{}, &lights, &cam,
+                                                     static_cast<uint64_t>(1000 * e + 10 * c));
+            report.render_seconds += f.render.stats.seconds;
+            cv::Mat srgb;
+            f.image.srgb8.convertTo(srgb, CV_8U);
+            WriteImage(sdir / fmt::format("cam{}_{}.png", c, light_name), srgb, {.srgb = false});
+            if (!mesh_written) {
+              WritePly(sdir / "mesh.ply", f.actor.hires, {.binary = true, .double_precision = false});
+              WriteImage(sdir / "expression_displacement.exr", f.actor.expression_displacement);
+              json truth;
+              json w = json::object();
+              for (int i = 0; i < rig.num_expressions(); ++i) w[rig.expression_names[i]] = expressions[e][i];
+              truth["expression"] = w;
+              truth["identity"] = std::vector<double>(actor.identity.data(), actor.identity.data() + actor.identity.size());
+              WriteJsonFile(sdir / "truth.json", truth);
+              mesh_written = true;
+            }
+          }
+        }
+        scans.push_back({{"name", names[e]}, {"cameras", cams}});
+        ++report.frames;
+        progress.Advance();
+      }
+      actors.push_back({{"folder", adir.filename().string()}, {"seed", actor_seeds[a]}, {"scans", scans}});
+    }
+    index["actors"] = actors;
+    WriteJsonFile(dir / "scans.json", index);
+  });
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return report;
+}
+
+TriMesh RebuildDatasetFrameMesh(const fs::path& dataset, int frame) {
+  const json ds = ReadJsonFile(dataset / "dataset.json");
+  Require(ds.value("format", "") == "crease synthetic sequence",
+          fmt::format("{}: not a crease sequence dataset", (dataset / "dataset.json").string()));
+  const FaceRig rig = ReadRig(dataset / "rig.crig");
+  const Actor actor = ReadActor(dataset / "actor.json");
+  const fs::path truth_path = dataset / "truth" / (FrameName(frame) + ".json");
+  Require(fs::exists(truth_path), fmt::format("{}: frame {} is not in this dataset (frames {}..{})", truth_path.string(),
+                                              frame, ds.value("first_frame", 0),
+                                              ds.value("first_frame", 0) + ds.value("frames", 0) - 1));
+  const json truth = ReadJsonFile(truth_path);
+  Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.num_expressions());
+  for (auto it = truth.at("expression").begin(); it != truth.at("expression").end(); ++it) {
+    const int i = rig.ExpressionIndex(it.key());
+    Require(i >= 0, fmt::format("{}: expression '{}' is not in the rig", truth_path.string(), it.key()));
+    w[i] = it->get<double>();
+  }
+  const ActorModel model(rig, actor);
+  return model.Frame(w, true).hires;
+}
+
+}  // namespace crease

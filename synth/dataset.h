@@ -1,0 +1,94 @@
+// Self-describing dataset folders written by the studio (issue 3, part 6).
+//
+// Sequence dataset (`crease synth sequence`):
+//   dataset.json      what is here: format, version, frame count, fps, image size,
+//                     the studio options, and the file layout below
+//   rig.crig          the rig (core/face_rig.h)
+//   actor.json        the actor definition (synth/actor.h): with the rig, enough to
+//                     rebuild every layer of every frame
+//   sequence.yaml     the performance (synth/sequence.h)
+//   camera.json       intrinsics and cam_from_world (core/camera.h; head pose is per frame)
+//   frames/NNNNNN.png         what the camera recorded (sRGB, 8-bit, sensor noise)
+//   frames/NNNNNN.exr         optional: the noiseless linear render
+//   truth/NNNNNN.json         rig parameters (expression weights by name, identity),
+//                             head pose, cam_from_head, light, the 2D projection
+//                             and visibility of every landmark
+//   truth/NNNNNN_vertices.bin float32 triples (x px, y px, visible 0/1), one per
+//                             coarse rig vertex
+//   maps/NNNNNN_expression_displacement.exr  medium-scale expression displacement
+//                             D (mm, along the coarse normal; the quantity the paper
+//                             regresses, Sec. 4.1), in the rig's UV layout
+//   maps/static_displacement.exr, maps/mesoscopic_displacement.exr  the actor's
+//                             person-specific medium shape and pores (mm), all frames
+//   maps/albedo.exr, specular.exr, roughness.exr  the actor's skin
+// The folder is written under a temporary name and renamed when complete.
+//
+// Scan set (`crease synth scans`): per actor a neutral and extreme expressions,
+// each with its high-resolution mesh (PLY, head frame), images from calibrated
+// cameras under one or more light rigs, and the ground-truth maps:
+//   scans.json, rig.crig, actor_NNN/actor.json,
+//   actor_NNN/SCAN/{mesh.ply, camK_LIGHT.png, camK.json, truth.json,
+//                   expression_displacement.exr}
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/face_rig.h"
+#include "core/tri_mesh.h"
+#include "synth/actor.h"
+#include "synth/sequence.h"
+#include "synth/studio.h"
+
+namespace crease {
+
+struct SequenceDatasetOptions {
+  StudioOptions studio;
+  bool write_exr = false;   // also the noiseless linear frame as EXR
+  bool write_maps = true;   // per-frame expression displacement maps
+  int first_frame = 0;      // frame range [first_frame, first_frame + max_frames)
+  int max_frames = -1;      // -1: all frames of the sequence
+  bool overwrite = false;   // replace an existing output folder
+  // Drop sequence channels for expressions the rig lacks (with a warning in the
+  // report) instead of failing — for built-in presets on rigs with fewer expressions.
+  bool ignore_missing_expressions = false;
+};
+
+struct DatasetReport {
+  int frames = 0;
+  double seconds = 0.0;
+  double render_seconds = 0.0;
+  double surface_seconds = 0.0;
+  std::string path;
+  std::vector<std::string> warnings;
+};
+
+DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const Sequence& sequence,
+                                   const SequenceDatasetOptions& options, const std::filesystem::path& out);
+
+struct ScanSetOptions {
+  StudioOptions studio;              // image size, sensor, samples; cameras are made here
+  int cameras = 3;                   // on an arc in front of the face
+  double camera_arc_deg = 50.0;      // total horizontal spread of the cameras
+  std::vector<std::string> light_rigs = {"studio"};  // each scan is imaged under every rig
+  // Expressions per scan: "name=w,name=w"; the defaults show the main wrinkles.
+  std::vector<std::string> expressions = {"browInnerUp=1,browOuterUp=1", "browDown=1",
+                                          "mouthSmile=1,cheekSquint=0.8,eyeSquint=0.7", "noseSneer=1"};
+  bool overwrite = false;
+};
+
+// Actors are generated from `actor_seeds` with `actor_options`.
+DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& actor_seeds,
+                           const ActorOptions& actor_options, const ScanSetOptions& options,
+                           const std::filesystem::path& out);
+
+// Rebuilds the full high-resolution ground-truth surface of frame `frame` of a
+// sequence dataset (head frame, mm). Errors name the file that is missing or wrong.
+TriMesh RebuildDatasetFrameMesh(const std::filesystem::path& dataset, int frame);
+
+// "name=w,name=w" → expression weights for the rig (names resolve like sequences: a
+// name without _L/_R drives both sides).
+Eigen::VectorXd ParseExpressionSpec(const std::string& spec, const FaceRig& rig);
+
+}  // namespace crease

@@ -1,0 +1,73 @@
+// Skin of a synthetic actor, as maps in the rig's UV layout (square, texel
+// convention of DESIGN.md):
+//   * mesoscopic displacement (pores and fine lines, ~10–50 µm; the layer that
+//     paper Sec. 5.3 adds from image detail), CV_32F, mm along the normal;
+//   * diffuse albedo (linear RGB, CV_32FC3): per-actor tone, low-frequency
+//     colour variation, blotches, freckles, redder lips, darker brows, a tint
+//     around the eyes;
+//   * specular intensity (CV_32F, weight of the specular lobe, 1 = nominal skin)
+//     and roughness (CV_32F, GGX α) with an oily T-zone.
+// Each map is drawn from its own seeded stream, independent of the wrinkle
+// layout. Everything hangs on FaceAnchors and the rig's region masks, so it
+// works on any rig with a face UV chart.
+//
+// Differences from reality: pores are isotropic pits on band-passed noise (no
+// pore orientation field); fine lines are short straight scratches in two
+// dominant directions; albedo is a multiplicative layer stack, not a spectral
+// melanin/haemoglobin model; brows are a colour only (no hair geometry).
+#pragma once
+
+#include <cstdint>
+
+#include <opencv2/core/mat.hpp>
+
+#include "core/face_rig.h"
+#include "synth/wrinkles.h"
+
+namespace crease {
+
+struct MesoscopicParams {
+  uint64_t seed = 0;
+  double pore_depth_mm = 0.03;       // depth of a typical pore pit, mm
+  double pore_density_per_mm2 = 1.0; // pits per mm² on the cheeks and nose (forehead 0.7×, elsewhere 0.4×)
+  double roughness_mm = 0.012;       // RMS of the band-passed micro relief, mm
+  double fine_line_depth_mm = 0.015; // depth of fine lines, mm
+  double fine_line_density = 0.5;    // fine lines per mm² (short scratches)
+};
+
+struct SkinParams {
+  uint64_t seed = 0;
+  double tone = 0.3;         // [0, 1]: 0 very light, 1 very dark
+  double redness = 0.3;      // [0, 1]: overall rosiness (haemoglobin)
+  double variation = 0.5;    // [0, 1]: low-frequency colour variation
+  double blotches = 0.3;     // [0, 1]: red blotches
+  double freckles = 0.2;     // [0, 1]: freckle density and contrast
+  double lip_redness = 0.6;  // [0, 1]
+  double brow_darkness = 0.7;  // [0, 1]
+  double eye_tint = 0.4;     // [0, 1]: darker, bluish-purple tint around the eyes
+  double oiliness = 0.5;     // [0, 1]: specular boost and lower roughness in the T-zone
+  double specular = 1.0;     // overall specular weight (1 = nominal skin)
+  double roughness = 0.4;    // base GGX α
+};
+
+// Random parameters for one actor (own stream: `rng` is consumed, nothing else).
+MesoscopicParams GenerateMesoscopicParams(Rng& rng);
+SkinParams GenerateSkinParams(Rng& rng);
+
+// Mesoscopic displacement map, CV_32F size², mm (negative = pits/valleys).
+cv::Mat BuildMesoscopicMap(const FaceRig& rig, const FaceAnchors& anchors, const MesoscopicParams& params,
+                           int size);
+
+struct SkinMaps {
+  cv::Mat albedo;     // CV_32FC3, linear RGB in [0, 1]
+  cv::Mat specular;   // CV_32F, specular lobe weight (≈ 0.5–1.8)
+  cv::Mat roughness;  // CV_32F, GGX α (≈ 0.2–0.55)
+};
+SkinMaps BuildSkinMaps(const FaceRig& rig, const FaceAnchors& anchors, const SkinParams& params, int size);
+
+// Random field helpers shared by the actor layers: white noise of `rng` on a
+// grid of `cells`² (cells ≥ 2), blurred by `sigma_cells`, normalised to zero
+// mean and unit RMS, then resized (bicubic) to size². Deterministic.
+cv::Mat SmoothNoise(Rng& rng, int cells, double sigma_cells, int size);
+
+}  // namespace crease

@@ -1,0 +1,340 @@
+#include "synth/studio.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <fmt/format.h>
+#include <opencv2/core.hpp>
+
+#include "core/error.h"
+#include "core/mesh_ops.h"
+#include "core/mesh_primitives.h"
+
+namespace crease {
+
+void StudioOptions::VisitFields(OptionVisitor& v) {
+  v.Field("width", width);
+  v.Field("height", height);
+  v.Field("fov_deg", fov_deg);
+  v.Field("distance_mm", distance_mm);
+  v.Field("light", light);
+  v.Field("light_fill", light_fill);
+  v.Field("samples_per_axis", samples_per_axis);
+  v.Field("motion_blur_subframes", motion_blur_subframes);
+  v.Field("shutter", shutter);
+  v.Field("occluder", occluder);
+  v.Field("seed", seed);
+  // Sensor options are flattened with a prefix-free naming of their own fields.
+  sensor.VisitFields(v);
+}
+
+void StudioOptions::Check() const {
+  const char* o = "StudioOptions";
+  CheckGe(o, "width", width, 16);
+  CheckGe(o, "height", height, 16);
+  CheckLe(o, "width", width, 8192);
+  CheckLe(o, "height", height, 8192);
+  CheckGt(o, "fov_deg", fov_deg, 1.0);
+  CheckLt(o, "fov_deg", fov_deg, 150.0);
+  CheckGt(o, "distance_mm", distance_mm, 100.0);
+  CheckGe(o, "light_fill", light_fill, 0.0);
+  CheckGe(o, "samples_per_axis", samples_per_axis, 1);
+  CheckLe(o, "samples_per_axis", samples_per_axis, 16);
+  CheckGe(o, "motion_blur_subframes", motion_blur_subframes, 1);
+  CheckGt(o, "shutter", shutter, 0.0);
+  CheckLe(o, "shutter", shutter, 1.0);
+  MakeLightRig(light);  // throws for unknown presets, naming them
+  sensor.Check();
+}
+
+namespace {
+
+constexpr double kUnderlayDepthMm = 3.0;
+
+// Material of a rig part, by its name.
+Material PartMaterial(const std::string& name, const Eigen::Vector3f& skin_tone) {
+  auto has = [&](const char* s) { return name.find(s) != std::string::npos; };
+  Material m = MaterialPreset("skin");
+  m.textured = false;
+  m.albedo = skin_tone;
+  if (has("pupil")) {
+    m.albedo = {0.01f, 0.01f, 0.012f};
+    m.specular = 1.0f;
+    m.roughness = 0.1f;
+  } else if (has("iris")) {
+    m.albedo = {0.12f, 0.07f, 0.03f};
+    m.specular = 1.0f;
+    m.roughness = 0.1f;
+  } else if (has("eye")) {  // eyeballs: sclera
+    m.albedo = {0.62f, 0.58f, 0.55f};
+    m.specular = 1.0f;
+    m.roughness = 0.12f;
+  } else if (has("mouth") || has("cavity")) {
+    m.albedo = {0.05f, 0.01f, 0.01f};
+    m.specular = 0.2f;
+  } else if (has("teeth")) {
+    m.albedo = {0.6f, 0.58f, 0.5f};
+  } else if (has("hair") || has("brow")) {
+    m.albedo = {0.035f, 0.022f, 0.014f};
+    m.specular = 0.6f;
+    m.roughness = 0.5f;
+  }
+  return m;
+}
+
+}  // namespace
+
+struct Studio::Scene {
+  FaceRig rig;
+  int hires_vertices = 0;
+  int face_part = -1;                 // the rig's face part (-1: every vertex is face)
+  std::vector<int> underlay_source;   // rig vertex of each underlay vertex
+  int occluder_first = -1;            // first occluder vertex (-1: none)
+  TriMesh occluder_unit;              // unit sphere
+  std::unique_ptr<Renderer> renderer;
+};
+
+Studio::~Studio() = default;
+
+Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& options)
+    : options_(options), scene_(std::make_unique<Scene>()) {
+  options_.Check();
+  model_ = std::make_unique<ActorModel>(rig, actor);
+  Scene& s = *scene_;
+  s.rig = rig;
+  s.face_part = rig.PartIndex("face");
+  auto is_face = [&](int v) { return s.face_part < 0 || rig.vertex_part.empty() || rig.vertex_part[v] == s.face_part; };
+
+  // Camera: looking at the landmarks' centre (or the face's) from the front.
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  if (!rig.landmarks.empty()) {
+    for (const auto& l : rig.landmarks) centre += rig.neutral.V.row(l.vertex).transpose();
+    centre /= static_cast<double>(rig.landmarks.size());
+  } else {
+    const auto [lo, hi] = BoundingBox(rig.neutral);
+    centre = 0.5 * (lo + hi);
+  }
+  const auto [lo, hi] = BoundingBox(rig.neutral);
+  head_centre_ = Eigen::Vector3d(0.5 * (lo.x() + hi.x()), centre.y(), 0.5 * (lo.z() + hi.z()));
+  camera_ = LookAtCamera(CameraIntrinsics::FromFov(options_.fov_deg, options_.width, options_.height),
+                         centre + Eigen::Vector3d(0, 0, options_.distance_mm), centre, Eigen::Vector3d::UnitY());
+
+  // Topology: hi-res face | rig (non-face triangles) | underlay (face triangles, pushed in) | occluder.
+  const ActorFrame f0 = model_->Frame(Eigen::VectorXd::Zero(rig.num_expressions()), true);
+  s.hires_vertices = f0.hires.num_vertices();
+  const int nr = rig.num_vertices();
+  std::vector<int> underlay_of(nr, -1);
+  std::vector<Eigen::Vector3i> faces;
+  for (int f = 0; f < f0.hires.num_faces(); ++f) faces.emplace_back(f0.hires.F.row(f).transpose());
+  std::vector<Eigen::Vector3i> underlay_faces;
+  for (int f = 0; f < rig.neutral.num_faces(); ++f) {
+    const Eigen::Vector3i t = rig.neutral.F.row(f).transpose();
+    if (is_face(t[0]) && is_face(t[1]) && is_face(t[2])) {
+      Eigen::Vector3i u;
+      for (int k = 0; k < 3; ++k) {
+        if (underlay_of[t[k]] < 0) {
+          underlay_of[t[k]] = static_cast<int>(s.underlay_source.size());
+          s.underlay_source.push_back(t[k]);
+        }
+        u[k] = underlay_of[t[k]];
+      }
+      underlay_faces.push_back(u);
+    } else {
+      faces.emplace_back(t + Eigen::Vector3i::Constant(s.hires_vertices));
+    }
+  }
+  const int underlay_first = s.hires_vertices + nr;
+  for (const auto& u : underlay_faces) faces.emplace_back(u + Eigen::Vector3i::Constant(underlay_first));
+  const int nu = static_cast<int>(s.underlay_source.size());
+  int total = underlay_first + nu;
+  if (options_.occluder) {
+    s.occluder_unit = MakeIcosphere(1.0, 3);
+    s.occluder_first = total;
+    for (int f = 0; f < s.occluder_unit.num_faces(); ++f) {
+      faces.emplace_back(s.occluder_unit.F.row(f).transpose() + Eigen::Vector3i::Constant(total));
+    }
+    total += s.occluder_unit.num_vertices();
+  }
+
+  TriMesh mesh;
+  mesh.F.resize(static_cast<int>(faces.size()), 3);
+  for (size_t f = 0; f < faces.size(); ++f) mesh.F.row(static_cast<int>(f)) = faces[f].transpose();
+  mesh.UV = MatX2d::Constant(total, 2, 2.0);  // outside the face chart: per-part materials
+  mesh.UV.topRows(s.hires_vertices) = f0.hires.UV;
+  mesh.UV.middleRows(s.hires_vertices, nr) = rig.neutral.UV;
+  for (int i = 0; i < nu; ++i) mesh.UV.row(underlay_first + i) = rig.neutral.UV.row(s.underlay_source[i]);
+
+  // Materials: part 0 = textured skin (hi-res face, underlay, the rig's face part),
+  // 1 + p = rig part p, last = occluder.
+  SceneMaterials materials;
+  materials.albedo = model_->skin().albedo;
+  // The actor's skin maps are in physical terms (synth/skin.h): a specular weight
+  // with 1 = nominal skin, and GGX α. The renderer takes the specular intensity ρ_s
+  // in [0, 1] (nominal skin 0.5, MaterialPreset("skin")) and the perceptual
+  // roughness r with α = r².
+  const float nominal_specular = MaterialPreset("skin").specular;
+  cv::Mat spec = model_->skin().specular * nominal_specular;
+  cv::min(spec, 1.0, materials.specular);
+  cv::max(materials.specular, 0.0, materials.specular);
+  cv::Mat alpha;
+  cv::max(model_->skin().roughness, 0.02f * 0.02f, alpha);
+  cv::sqrt(alpha, materials.roughness);
+  cv::Mat red;
+  cv::extractChannel(materials.albedo, red, 0);
+  const cv::Scalar mean_albedo = cv::mean(materials.albedo, red > 0);
+  const Eigen::Vector3f skin_tone(static_cast<float>(mean_albedo[0]), static_cast<float>(mean_albedo[1]),
+                                  static_cast<float>(mean_albedo[2]));
+  Material face = MaterialPreset("skin");
+  face.textured = true;
+  materials.part_materials.push_back(face);
+  for (const auto& name : rig.part_names) {
+    materials.part_materials.push_back(name == "face" ? face : PartMaterial(name, skin_tone));
+  }
+  Material occluder = MaterialPreset("grey");
+  occluder.textured = false;
+  materials.part_materials.push_back(occluder);
+  const int occluder_part = static_cast<int>(materials.part_materials.size()) - 1;
+  materials.vertex_part.assign(total, 0);
+  for (int v = 0; v < nr; ++v) {
+    materials.vertex_part[s.hires_vertices + v] = rig.vertex_part.empty() ? 0 : 1 + rig.vertex_part[v];
+  }
+  for (int v = s.occluder_first >= 0 ? s.occluder_first : total; v < total; ++v) materials.vertex_part[v] = occluder_part;
+  mesh.V = MatX3d::Zero(total, 3);
+  SequenceFrame rest;
+  mesh.V = SceneVertices(f0, rest, WorldFromHead(rest));
+  s.renderer = std::make_unique<Renderer>(mesh, std::move(materials), RendererOptions{}, "studio scene");
+}
+
+Rigid3d Studio::WorldFromHead(const SequenceFrame& f) const {
+  const double d = std::numbers::pi / 180.0;
+  const Eigen::Quaterniond q = Eigen::AngleAxisd(f.yaw_deg * d, Eigen::Vector3d::UnitY()) *
+                               Eigen::AngleAxisd(f.pitch_deg * d, Eigen::Vector3d::UnitX()) *
+                               Eigen::AngleAxisd(f.roll_deg * d, Eigen::Vector3d::UnitZ());
+  // Rotation about the head centre, then the translation.
+  const Eigen::Vector3d t = head_centre_ - q * head_centre_ + Eigen::Vector3d(f.tx_mm, f.ty_mm, f.tz_mm);
+  return Rigid3d(q, t);
+}
+
+LightRig Studio::FrameLights(const Sequence& sequence, const SequenceFrame& f) const {
+  bool keyed = false;
+  for (const auto& k : sequence.keys) {
+    for (const auto& [channel, v] : k.values) keyed = keyed || channel.rfind("light:", 0) == 0;
+  }
+  if (!keyed) return MakeLightRig(options_.light);
+  LightRig rig;
+  rig.name = fmt::format("directional az {:.1f} el {:.1f}", f.light_azimuth_deg, f.light_elevation_deg);
+  rig.lights.push_back(DirectionalFromAzimuthElevation(f.light_azimuth_deg, f.light_elevation_deg, f.light_intensity));
+  if (options_.light_fill > 0) {
+    AmbientOcclusionLight fill;
+    fill.color = Eigen::Vector3d::Constant(options_.light_fill);
+    rig.lights.push_back(fill);
+  }
+  return rig;
+}
+
+MatX3d Studio::SceneVertices(const ActorFrame& frame, const SequenceFrame& f, const Rigid3d& world_from_head) const {
+  const Scene& s = *scene_;
+  const int nr = s.rig.num_vertices(), nu = static_cast<int>(s.underlay_source.size());
+  const int total = s.hires_vertices + nr + nu + (s.occluder_first >= 0 ? s.occluder_unit.num_vertices() : 0);
+  MatX3d V(total, 3);
+  V.topRows(s.hires_vertices) = frame.hires.V;
+  V.middleRows(s.hires_vertices, nr) = frame.coarse.V;
+  const MatX3d& N = frame.coarse.N;
+  for (int i = 0; i < nu; ++i) {
+    const int v = s.underlay_source[i];
+    V.row(s.hires_vertices + nr + i) = frame.coarse.V.row(v) - kUnderlayDepthMm * N.row(v);
+  }
+  const Eigen::Matrix3d R = world_from_head.rotation.toRotationMatrix();
+  const int posed = s.hires_vertices + nr + nu;
+  for (int i = 0; i < posed; ++i) V.row(i) = (R * V.row(i).transpose() + world_from_head.translation).transpose();
+  if (s.occluder_first >= 0) {
+    // Sequences place the occluder relative to the head centre; without one it is parked behind the camera.
+    const Eigen::Vector3d c = f.has_occluder ? Eigen::Vector3d(head_centre_ + Eigen::Vector3d(f.occluder_x_mm, f.occluder_y_mm, f.occluder_z_mm))
+                                             : Eigen::Vector3d(camera_.CentreInHead() + Eigen::Vector3d(0, 0, 5000));
+    const double r = f.has_occluder ? std::max(1.0, f.occluder_radius_mm) : 1.0;
+    for (int i = 0; i < s.occluder_unit.num_vertices(); ++i) {
+      V.row(s.occluder_first + i) = (c + r * s.occluder_unit.V.row(i).transpose()).transpose();
+    }
+  }
+  return V;
+}
+
+StudioFrame Studio::RenderFrame(const Sequence& sequence, int index) const {
+  const SequenceFrame f = sequence.Frame(index);
+  Eigen::VectorXd w(scene_->rig.num_expressions());
+  const std::vector<double> weights = ExpressionWeightsForRig(f, scene_->rig);
+  for (int i = 0; i < w.size(); ++i) w[i] = weights[i];
+  return Render(w, f, FrameLights(sequence, f), camera_, sequence.motion_blur, 1.0 / sequence.fps, &sequence,
+                static_cast<uint64_t>(index));
+}
+
+StudioFrame Studio::RenderStill(const Eigen::VectorXd& expression, const SequenceFrame& f,
+                                const LightRig* light_override, const Camera* camera_override, uint64_t seed) const {
+  const LightRig lights = light_override ? *light_override : MakeLightRig(options_.light);
+  return Render(expression, f, lights, camera_override ? *camera_override : camera_, false, 0.0, nullptr, seed);
+}
+
+StudioFrame Studio::Render(const Eigen::VectorXd& expression, const SequenceFrame& f, const LightRig& lights,
+                           const Camera& camera, bool motion_blur, double frame_dt, const Sequence* sequence,
+                           uint64_t seed) const {
+  Scene& s = *scene_;
+  StudioFrame out;
+  out.actor = model_->Frame(expression, true);
+  const Rigid3d world_from_head = WorldFromHead(f);
+  RenderOptions ro;
+  ro.samples_per_axis = options_.samples_per_axis;
+  ro.passes = true;
+  ro.background = {0.02, 0.02, 0.025};
+  Rng rng = Rng(options_.seed).Fork(seed);
+  if (motion_blur && sequence && options_.motion_blur_subframes > 1) {
+    // Over the shutter the head moves (pose sampled from the sequence); the
+    // expression is held at the frame's (its change within 1/60 s is small).
+    auto frame_at = [&](double u) {
+      SequenceFrame g = sequence->At(f.time_s + (u - 0.5) * options_.shutter * frame_dt);
+      g.has_occluder = f.has_occluder;
+      return MotionBlurFrame{SceneVertices(out.actor, g, WorldFromHead(g)), camera};
+    };
+    out.render = RenderMotionBlurred(*s.renderer, frame_at, options_.motion_blur_subframes, lights, ro, rng);
+  } else {
+    s.renderer->UpdateGeometry(SceneVertices(out.actor, f, world_from_head));
+    out.render = s.renderer->Render(camera, lights, ro, rng);
+  }
+  out.image = ApplySensor(out.render.image, options_.sensor, rng);
+
+  // Ground truth: projections of every coarse vertex and landmark, and their visibility
+  // from the depth pass (visible = in the image and not behind the rendered surface).
+  StudioFrameTruth& t = out.truth;
+  t.index = f.index;
+  t.time_s = f.time_s;
+  t.expression = expression;
+  t.yaw_deg = f.yaw_deg;
+  t.pitch_deg = f.pitch_deg;
+  t.roll_deg = f.roll_deg;
+  t.translation_mm = Eigen::Vector3d(f.tx_mm, f.ty_mm, f.tz_mm);
+  t.cam_from_head = camera.cam_from_head * world_from_head;
+  t.light_description = lights.name;
+  const Camera head_camera(camera.intrinsics, t.cam_from_head);
+  const MatX3d& V = out.actor.coarse.V;
+  t.vertex_pixels = head_camera.ProjectAll(V);
+  t.vertex_visible.assign(V.rows(), 0);
+  const cv::Mat& depth = out.render.depth;
+  for (int v = 0; v < V.rows(); ++v) {
+    const Eigen::Vector2d p = t.vertex_pixels.row(v).transpose();
+    if (!p.allFinite() || !head_camera.InImage(p)) continue;
+    const double z = (t.cam_from_head * V.row(v).transpose()).z();
+    const int x = std::clamp(static_cast<int>(std::lround(p.x())), 0, depth.cols - 1);
+    const int y = std::clamp(static_cast<int>(std::lround(p.y())), 0, depth.rows - 1);
+    const float d = depth.at<float>(y, x);
+    t.vertex_visible[v] = d > 0 && z <= d + 2.5 + 0.005 * z;
+  }
+  const auto& lms = s.rig.landmarks;
+  t.landmark_pixels.resize(static_cast<int>(lms.size()), 2);
+  t.landmark_visible.resize(lms.size());
+  for (size_t i = 0; i < lms.size(); ++i) {
+    t.landmark_pixels.row(static_cast<int>(i)) = t.vertex_pixels.row(lms[i].vertex);
+    t.landmark_visible[i] = t.vertex_visible[lms[i].vertex];
+  }
+  return out;
+}
+
+}  // namespace crease

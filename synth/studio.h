@@ -1,0 +1,111 @@
+// The studio: an actor of a rig on a posable head, lit by a light rig, seen by a
+// camera, rendered by the Embree renderer through the sensor model — with the
+// exact ground truth of every frame. Used by the dataset writers (synth/dataset.h)
+// and the realism check.
+//
+// Scene per frame (one topology for the whole sequence, so the BVH is refitted,
+// never rebuilt, and any frame can be relit):
+//   * the actor's high-resolution face surface (the rig's UV chart [0,1]², with
+//     static shape, wrinkles and pores), textured with the actor's skin maps;
+//   * the rig's other parts (cranium, ears, neck, eyes, mouth cavity, hair, …)
+//     at the same identity and expression, with per-part materials;
+//   * an underlay: the rig's face part pushed 3 mm inwards, hiding sub-texel
+//     cracks between the resampled face and the rest of the head;
+//   * optionally an occluder (a sphere) that sequences move in front of the face.
+// The head is posed (yaw, pitch, roll about the head centre, then translated);
+// camera and lights stay fixed in the world (lights attached to the camera).
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "core/camera.h"
+#include "core/face_rig.h"
+#include "core/options.h"
+#include "core/rng.h"
+#include "synth/actor.h"
+#include "synth/lights.h"
+#include "synth/renderer.h"
+#include "synth/sensor.h"
+#include "synth/sequence.h"
+
+namespace crease {
+
+struct StudioOptions {
+  int width = 640;                  // image size, pixels (a webcam, as in the paper's capture)
+  int height = 480;
+  double fov_deg = 50.0;            // horizontal field of view, degrees
+  double distance_mm = 450.0;       // camera to face centre, mm
+  std::string light = "studio";     // light rig preset when the sequence keys no light (synth/lights.h)
+  double light_fill = 0.15;         // ambient fill under a sequence-driven directional light
+  int samples_per_axis = 1;         // anti-aliasing: N×N samples per pixel
+  int motion_blur_subframes = 5;    // sub-frames over the shutter when the sequence asks for motion blur
+  double shutter = 0.5;             // shutter interval as a fraction of the frame time
+  bool occluder = true;             // add the occluder sphere when the sequence keys one
+  SensorOptions sensor;
+  uint64_t seed = 1;                // noise seed (frame i uses a stream derived from it and i)
+
+  void VisitFields(OptionVisitor& v);
+  void Check() const;
+};
+
+// Ground truth of one rendered frame.
+struct StudioFrameTruth {
+  int index = 0;
+  double time_s = 0.0;
+  Eigen::VectorXd expression;     // rig expression weights β
+  Rigid3d cam_from_head;          // includes the head pose
+  double yaw_deg = 0, pitch_deg = 0, roll_deg = 0;
+  Eigen::Vector3d translation_mm = Eigen::Vector3d::Zero();
+  MatX2d vertex_pixels;           // #V×2 projection of every coarse rig vertex
+  std::vector<uint8_t> vertex_visible;  // #V: 1 when the vertex is seen (not occluded, in the image)
+  MatX2d landmark_pixels;         // #landmarks×2, rig landmark order
+  std::vector<uint8_t> landmark_visible;
+  std::string light_description;
+};
+
+struct StudioFrame {
+  SensorImage image;        // what the camera records
+  RenderResult render;      // the noiseless linear render and its passes
+  ActorFrame actor;         // coarse and high-resolution surfaces, displacement maps
+  StudioFrameTruth truth;
+};
+
+class Studio {
+ public:
+  Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& options);
+  ~Studio();
+
+  // Renders frame `index` of `sequence`. Deterministic for a given seed.
+  StudioFrame RenderFrame(const Sequence& sequence, int index) const;
+  // Renders one still: given expression weights (by rig index), pose and light rig.
+  StudioFrame RenderStill(const Eigen::VectorXd& expression, const SequenceFrame& pose_and_light,
+                          const LightRig* light_override, const Camera* camera_override, uint64_t seed) const;
+
+  const Camera& camera() const { return camera_; }
+  const ActorModel& model() const { return *model_; }
+  const StudioOptions& options() const { return options_; }
+  // World-from-head transform for a pose.
+  Rigid3d WorldFromHead(const SequenceFrame& f) const;
+  // The light rig of a frame: the sequence's directional light if it keys one,
+  // else options.light.
+  LightRig FrameLights(const Sequence& sequence, const SequenceFrame& f) const;
+
+ private:
+  struct Scene;
+  MatX3d SceneVertices(const ActorFrame& frame, const SequenceFrame& f, const Rigid3d& world_from_head) const;
+  StudioFrame Render(const Eigen::VectorXd& expression, const SequenceFrame& f, const LightRig& lights,
+                     const Camera& camera, bool motion_blur, double frame_dt, const Sequence* sequence,
+                     uint64_t seed) const;
+
+  StudioOptions options_;
+  std::unique_ptr<ActorModel> model_;
+  Camera camera_;
+  Eigen::Vector3d head_centre_;
+  std::unique_ptr<Scene> scene_;
+};
+
+}  // namespace crease

@@ -1,0 +1,126 @@
+#include "synth/studio.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "core/file_util.h"
+#include "core/json_io.h"
+#include "core/rig_import.h"
+#include "synth/dataset.h"
+#include "tests/test_util.h"
+
+namespace crease {
+namespace {
+namespace fs = std::filesystem;
+using testing::ErrorOf;
+using testing::TestDir;
+
+const FaceRig& SampleRig() {
+  static const FaceRig rig = [] {
+    RigImportOptions o;
+    o.units_to_mm = 10.0;
+    return ImportObjRig(fs::path(CREASE_DATA_DIR) / "sample_rig", o);
+  }();
+  return rig;
+}
+
+ActorOptions SmallActor() {
+  ActorOptions o;
+  o.resolution = 256;
+  o.surface_min_vertices = 0;
+  return o;
+}
+
+SequenceDatasetOptions SmallStudio() {
+  SequenceDatasetOptions o;
+  o.studio.width = 160;
+  o.studio.height = 120;
+  o.max_frames = 3;
+  o.first_frame = 20;  // the brow is raised
+  return o;
+}
+
+TEST(Studio, GroundTruthProjectionsLandOnTheRenderedFace) {
+  const Actor actor = GenerateActor(SampleRig(), 3, SmallActor());
+  StudioOptions so;
+  so.width = 320;
+  so.height = 240;
+  const Studio studio(SampleRig(), actor, so);
+  const StudioFrame f = studio.RenderStill(Eigen::VectorXd::Zero(SampleRig().num_expressions()), SequenceFrame{},
+                                           nullptr, nullptr, 1);
+  ASSERT_EQ(f.truth.landmark_pixels.rows(), 68);
+  int visible = 0;
+  for (int i = 0; i < 68; ++i) {
+    if (!f.truth.landmark_visible[i]) continue;
+    ++visible;
+    const int x = static_cast<int>(std::lround(f.truth.landmark_pixels(i, 0)));
+    const int y = static_cast<int>(std::lround(f.truth.landmark_pixels(i, 1)));
+    EXPECT_GT(f.render.alpha.at<float>(y, x), 0.0f) << "landmark " << i;
+  }
+  EXPECT_GE(visible, 60);  // frontal: nearly all landmarks are seen
+  // A head turned away hides landmarks on the far side.
+  SequenceFrame turned;
+  turned.yaw_deg = 70;
+  const StudioFrame g = studio.RenderStill(Eigen::VectorXd::Zero(SampleRig().num_expressions()), turned, nullptr,
+                                           nullptr, 1);
+  int visible_turned = 0;
+  for (uint8_t v : g.truth.landmark_visible) visible_turned += v;
+  EXPECT_LT(visible_turned, visible);
+}
+
+TEST(Studio, SequenceDatasetIsCompleteDeterministicAndRebuildable) {
+  const fs::path dir = TestDir();
+  const Actor actor = GenerateActor(SampleRig(), 5, SmallActor());
+  // The sample rig has a subset of the procedural rig's expressions.
+  const Sequence seq = ParseSequenceYaml(
+      "name: raise\nkeys:\n  - t: 0\n    expression: {browInnerUp: 0, jawOpen: 0}\n"
+      "  - t: 0.8\n    expression: {browInnerUp: 1, jawOpen: 0.3}\n",
+      "raise.yaml");
+  const DatasetReport r = WriteSequenceDataset(SampleRig(), actor, seq, SmallStudio(), dir / "a");
+  EXPECT_EQ(r.frames, 3);
+  for (const char* f : {"dataset.json", "rig.crig", "actor.json", "sequence.yaml", "camera.json", "frames/000021.png",
+                        "truth/000021.json", "truth/000021_vertices.bin", "maps/000021_expression_displacement.exr",
+                        "maps/static_displacement.exr", "maps/mesoscopic_displacement.exr"}) {
+    EXPECT_TRUE(fs::exists(dir / "a" / f)) << f;
+  }
+  EXPECT_EQ(fs::file_size(dir / "a" / "truth/000021_vertices.bin"),
+            static_cast<uintmax_t>(SampleRig().num_vertices()) * 3 * sizeof(float));
+  const nlohmann::json truth = ReadJsonFile(dir / "a" / "truth/000021.json");
+  EXPECT_GT(truth["expression"]["browInnerUp"].get<double>(), 0.0);
+  // Same seeds, same bytes.
+  WriteSequenceDataset(SampleRig(), actor, seq, SmallStudio(), dir / "b");
+  for (const char* f : {"frames/000022.png", "truth/000022.json", "truth/000022_vertices.bin"}) {
+    EXPECT_EQ(ReadFileToString(dir / "a" / f), ReadFileToString(dir / "b" / f)) << f;
+  }
+  // The ground-truth surface of a frame can be rebuilt from the folder alone.
+  const TriMesh m = RebuildDatasetFrameMesh(dir / "a", 21);
+  const ActorModel model(SampleRig(), actor);
+  Eigen::VectorXd w(SampleRig().num_expressions());
+  for (int i = 0; i < w.size(); ++i) w[i] = truth["expression"][SampleRig().expression_names[i]].get<double>();
+  EXPECT_EQ(m.V, model.Frame(w, true).hires.V);
+  // Errors: an existing folder, a frame outside the dataset, an expression the rig lacks.
+  EXPECT_NE(ErrorOf([&] { WriteSequenceDataset(SampleRig(), actor, seq, SmallStudio(), dir / "a"); })
+                .find("already exists"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { RebuildDatasetFrameMesh(dir / "a", 99); }).find("not in this dataset"), std::string::npos);
+  Sequence bad = seq;
+  bad.keys[0].values["expression:tongueOut"] = 1.0;
+  EXPECT_NE(ErrorOf([&] { WriteSequenceDataset(SampleRig(), actor, bad, SmallStudio(), dir / "c"); })
+                .find("'tongueOut', which the rig lacks"),
+            std::string::npos);
+  EXPECT_FALSE(fs::exists(dir / "c"));
+  // Presets on a rig with fewer expressions: missing channels are dropped with a warning.
+  SequenceDatasetOptions lenient = SmallStudio();
+  lenient.ignore_missing_expressions = true;
+  lenient.max_frames = 1;
+  const DatasetReport lr = WriteSequenceDataset(SampleRig(), actor, MakePresetSequence("wrinkle-workout"), lenient, dir / "d");
+  EXPECT_EQ(lr.frames, 1);
+  ASSERT_FALSE(lr.warnings.empty());
+  EXPECT_NE(lr.warnings[0].find("browOuterUp"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace crease
