@@ -174,7 +174,8 @@ Sequence MakePresetSequence(const std::string& preset, double seconds) {
   if (preset == "wrinkle-workout") {
     // Extreme expressions one after another (each ~1 s), neutral in between.
     const double d = seconds > 0 ? seconds : 8.0, k = d / 8.0;
-    b.Key(0, {{"light:azimuth_deg", 0}, {"light:elevation_deg", 15}, {"light:intensity", 1}});
+    // No light keys: the studio's light rig (`--light`) lights it, so the same
+    // performance can be compared under front and raking light.
     Pulse(b, 0.8 * k, 1.4 * k, 0.4 * k, {{"expression:browInnerUp", 1.0}, {"expression:browOuterUp", 1.0}});
     Pulse(b, 2.4 * k, 2.9 * k, 0.4 * k, {{"expression:browDown", 1.0}});
     Pulse(b, 3.8 * k, 4.3 * k, 0.4 * k,

@@ -37,6 +37,22 @@ ok "mesh convert vtp->ply ascii" "$crease" mesh convert "$tmp/e.vtp" "$tmp/e3.pl
 ok "mesh render" "$crease" mesh render "$tmp/e.vtp" --field region --width 64 --height 64 -o "$tmp/e.png"
 [ -s "$tmp/e.png" ] || { echo "FAIL: render wrote no image"; fails=$((fails+1)); }
 
+# The studio, end to end on small images.
+ok "synth rig" "$crease" synth rig -o "$tmp/head.crig"
+ok "synth actor" "$crease" synth actor --rig "$tmp/head.crig" --seed 3 -o "$tmp/actor.json"
+ok "synth render" "$crease" synth render --rig "$tmp/head.crig" --actor "$tmp/actor.json" -e browInnerUp=1 --light raking-above --size 160x120 --samples 1 -o "$tmp/still.png"
+ok "synth sequence" "$crease" synth sequence --rig "$tmp/head.crig" --actor "$tmp/actor.json" --preset wrinkle-workout --first-frame 30 --frames 2 --size 160x120 -o "$tmp/seq"
+[ -s "$tmp/seq/frames/000031.png" ] && [ -s "$tmp/seq/truth/000031.json" ] || { echo "FAIL: sequence outputs missing"; fails=$((fails+1)); }
+ok "synth mesh" "$crease" synth mesh --dataset "$tmp/seq" --frame 31 -o "$tmp/frame31.ply"
+bad "sequence exists" "already exists" "$crease" synth sequence --rig "$tmp/head.crig" --actor "$tmp/actor.json" --preset talking --frames 1 --size 160x120 -o "$tmp/seq"
+printf 'keys:\n  - t: 0\n    pose: {yawn: 1}\n' > "$tmp/bad.yaml"
+bad "bad sequence yaml" "unknown field 'yawn'" "$crease" synth sequence --rig "$tmp/head.crig" --actor "$tmp/actor.json" --script "$tmp/bad.yaml" -o "$tmp/seq2"
+[ ! -e "$tmp/seq2" ] || { echo "FAIL: a dataset was written despite an error"; fails=$((fails+1)); }
+bad "unknown light" "unknown" "$crease" synth render --rig "$tmp/head.crig" --seed 1 --light disco -o "$tmp/x.png"
+printf '{"version": 1}' > "$tmp/bad_actor.json"
+bad "bad actor" "bad_actor.json" "$crease" synth render --rig "$tmp/head.crig" --actor "$tmp/bad_actor.json" -o "$tmp/x.png"
+bad "frame not in dataset" "not in this dataset" "$crease" synth mesh --dataset "$tmp/seq" --frame 7 -o "$tmp/x.ply"
+
 bad "missing mesh" "nope.ply: file does not exist" "$crease" mesh info "$tmp/nope.ply"
 printf 'ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n' > "$tmp/badidx.ply"
 bad "index out of range" "badidx.ply" "$crease" mesh info "$tmp/badidx.ply"

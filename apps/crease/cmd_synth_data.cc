@@ -90,7 +90,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
     auto* cmd = synth->add_subcommand("render", "Render one still of an actor: expression, head pose, light rig");
     static std::string rig_path, actor_file, out, expression, light = "studio", size, exr;
     static uint64_t seed = 1;
-    static double yaw = 0, pitch = 0;
+    static double yaw = 0, pitch = 0, fov = 50;
     static int samples = 2;
     cmd->add_option("--rig", rig_path, "Rig (.crig)")->required();
     cmd->add_option("--actor", actor_file, "Actor definition (.json); default: generated from --seed");
@@ -99,6 +99,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_option("--light", light, "Light rig preset")->capture_default_str();
     cmd->add_option("--yaw", yaw, "Head yaw (degrees)");
     cmd->add_option("--pitch", pitch, "Head pitch (degrees)");
+    cmd->add_option("--fov", fov, "Horizontal field of view (degrees); smaller zooms in")->capture_default_str();
     cmd->add_option("--size", size, "Image size WIDTHxHEIGHT (default 640x480)");
     cmd->add_option("--samples", samples, "Anti-aliasing samples per pixel axis")->capture_default_str();
     cmd->add_option("--exr", exr, "Also write the noiseless linear render (EXR)");
@@ -110,6 +111,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
       ParseSize(size, &so);
       so.samples_per_axis = samples;
       so.light = light;
+      so.fov_deg = fov;
       const Studio studio(rig, actor, so);
       SequenceFrame pose;
       pose.yaw_deg = yaw;
