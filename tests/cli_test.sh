@@ -51,6 +51,8 @@ bad "bad sequence yaml" "unknown field 'yawn'" "$crease" synth sequence --rig "$
 bad "unknown light" "unknown" "$crease" synth render --rig "$tmp/head.crig" --seed 1 --light disco -o "$tmp/x.png"
 printf '{"version": 1}' > "$tmp/bad_actor.json"
 bad "bad actor" "bad_actor.json" "$crease" synth render --rig "$tmp/head.crig" --actor "$tmp/bad_actor.json" -o "$tmp/x.png"
+ok "render-scan" "$crease" synth render-scan --mesh "$tmp/e.obj" --albedo "$tmp/regions.png" --units mm --size 160x120 --samples 1 -o "$tmp/scan.png"
+bad "render-scan without texture" "tex.png: file does not exist" "$crease" synth render-scan --mesh "$tmp/e.obj" --albedo "$tmp/tex.png" -o "$tmp/x.png"
 bad "frame not in dataset" "not in this dataset" "$crease" synth mesh --dataset "$tmp/seq" --frame 7 -o "$tmp/x.ply"
 
 bad "missing mesh" "nope.ply: file does not exist" "$crease" mesh info "$tmp/nope.ply"

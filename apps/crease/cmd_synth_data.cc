@@ -2,6 +2,7 @@
 // datasets (synth/dataset.h) and the realism check (eval/realism_check.h).
 #include <cstdio>
 #include <filesystem>
+#include <numbers>
 #include <fmt/format.h>
 
 #include "apps/crease/commands.h"
@@ -12,7 +13,9 @@
 #include "core/json_io.h"
 #include "core/mesh_io.h"
 #include "eval/realism_check.h"
+#include "core/rig_import.h"
 #include "synth/dataset.h"
+#include "synth/scanned_head.h"
 
 namespace crease::app {
 namespace fs = std::filesystem;
@@ -210,6 +213,59 @@ void AddSynthDatasetCommands(CLI::App& app) {
       for (int a = 0; a < actors; ++a) seeds.push_back(seed + static_cast<uint64_t>(a));
       const DatasetReport r = WriteScanSet(rig, seeds, ActorOptions{}, o, out);
       std::printf("wrote %s: %d scans of %d actors in %.1f s\n", out.c_str(), r.frames, actors, r.seconds);
+    });
+  }
+
+  // synth render-scan
+  {
+    auto* cmd = synth->add_subcommand("render-scan", "Relight a real scanned head (mesh + albedo [+ displacement map])");
+    static std::string mesh, albedo, displacement, units = "mm", light = "studio", size, out;
+    static ScannedHeadOptions so;
+    static double yaw = 0, fov = 30;
+    static int samples = 2;
+    static uint64_t seed = 1;
+    cmd->add_option("--mesh", mesh, "Head mesh with UVs (.obj, .ply)")->required();
+    cmd->add_option("--albedo", albedo, "Colour texture in the mesh's UV layout (PNG, EXR, …)")->required();
+    cmd->add_option("--displacement", displacement, "Displacement map in the same UV layout (EXR, PNG)");
+    cmd->add_option("--displacement-scale", so.displacement_scale_mm, "mm per unit of the displacement map")->capture_default_str();
+    cmd->add_option("--midlevel", so.displacement_midlevel, "Map value of zero displacement (0.5 for 8-bit maps)")->capture_default_str();
+    cmd->add_option("--grid", so.grid_resolution, "Resampling grid for the displacement, texels per side")->capture_default_str();
+    cmd->add_option("--units", units, "Units of the mesh coordinates")->check(CLI::IsMember({"mm", "cm", "m"}))->capture_default_str();
+    cmd->add_flag("--keep-v", [](int64_t) { so.flip_v = false; }, "Do not flip v (the file's v already grows downwards)");
+    cmd->add_option("--light", light, "Light rig preset")->capture_default_str();
+    cmd->add_option("--yaw", yaw, "Turn the head (degrees)");
+    cmd->add_option("--fov", fov, "Horizontal field of view (degrees)")->capture_default_str();
+    cmd->add_option("--size", size, "Image size WIDTHxHEIGHT (default 640x480)");
+    cmd->add_option("--samples", samples, "Anti-aliasing samples per pixel axis")->capture_default_str();
+    cmd->add_option("--seed", seed, "Sensor noise seed")->capture_default_str();
+    cmd->add_option("--out,-o", out, "Output image (PNG)")->required();
+    cmd->callback([] {
+      so.units_to_mm = UnitsToMm(units);
+      const ScannedHead head = LoadScannedHead(mesh, albedo, displacement, so);
+      StudioOptions studio;
+      ParseSize(size, &studio);
+      TriMesh m = head.surface;
+      const auto [lo, hi] = BoundingBox(m);
+      const Eigen::Vector3d centre = 0.5 * (lo + hi);
+      const double r = yaw * std::numbers::pi / 180.0;
+      const Eigen::Matrix3d R = Eigen::AngleAxisd(r, Eigen::Vector3d::UnitY()).toRotationMatrix();
+      for (int v = 0; v < m.num_vertices(); ++v) m.V.row(v) = (R * (m.V.row(v).transpose() - centre) + centre).transpose();
+      m.N.resize(0, 3);
+      const double radius = 0.5 * (hi - lo).norm();
+      const CameraIntrinsics K = CameraIntrinsics::FromFov(fov, studio.width, studio.height);
+      const double distance = radius / std::sin(0.5 * std::min(fov, fov * studio.height / studio.width) * std::numbers::pi / 180.0);
+      const Camera camera = LookAtCamera(K, centre + Eigen::Vector3d(0, 0, distance), centre, Eigen::Vector3d::UnitY());
+      Renderer renderer(m, head.materials, RendererOptions{}, mesh);
+      RenderOptions ro;
+      ro.samples_per_axis = samples;
+      Rng rng(seed);
+      const RenderResult img = renderer.Render(camera, MakeLightRig(light), ro, rng);
+      const SensorImage sensor = ApplySensor(img.image, studio.sensor, rng);
+      cv::Mat srgb;
+      sensor.srgb8.convertTo(srgb, CV_8U);
+      WriteImage(out, srgb, {.srgb = false});
+      std::printf("wrote %s (%d scan vertices, %d rendered vertices, %.0f ms)\n", out.c_str(), head.source_vertices,
+                  m.num_vertices(), 1e3 * img.stats.seconds);
     });
   }
 

@@ -1,0 +1,50 @@
+// A real scanned head as a studio actor (issue 3, part 7): a mesh with UVs (OBJ or
+// PLY), an albedo texture and optionally a displacement map in the same UV layout,
+// relit by the studio renderer like any synthetic actor. For example a neutral head
+// scan with a 1024² colour map and a 4096² displacement map.
+//
+// The displacement is applied the way the studio builds its own actors
+// (synth/hires_surface.h): the mesh is resampled on a regular grid in its UV
+// layout (`grid_resolution`², one vertex per covered texel centre, Phong-rounded),
+// and each grid vertex moves along the interpolated normal by
+//   d = (value − displacement_midlevel) · displacement_scale_mm.
+// Without a displacement map the scan is rendered as it is.
+//
+// Differences from a full importer: normal maps and glTF files are not read yet (a
+// normal map is refused with a clear error rather than ignored); the scan is static
+// (no blendshapes), so it can be relit, posed and rendered, not animated.
+#pragma once
+
+#include <filesystem>
+#include <string>
+
+#include "core/options.h"
+#include "core/tri_mesh.h"
+#include "synth/renderer.h"
+
+namespace crease {
+
+struct ScannedHeadOptions {
+  double units_to_mm = 1.0;            // scale of the mesh file's coordinates
+  bool flip_v = true;                  // OBJ/PLY texture v grows upwards; crease's downwards
+  double displacement_scale_mm = 1.0;  // mm per unit of the displacement map's values
+  double displacement_midlevel = 0.0;  // map value meaning "no displacement" (0.5 for 8-bit maps)
+  int grid_resolution = 1024;          // resampling grid for displacement, texels per side
+  double phong_alpha = 0.75;           // rounding of the scan's facets under the displacement
+
+  void VisitFields(OptionVisitor& v);
+  void Check() const;
+};
+
+struct ScannedHead {
+  TriMesh surface;           // what is rendered (mm, crease UV convention)
+  SceneMaterials materials;  // albedo from the texture, skin specular
+  int source_vertices = 0;   // of the scan mesh
+};
+
+// Errors name the file and the problem: a mesh without UVs, a texture that cannot be
+// read, a displacement map with several channels.
+ScannedHead LoadScannedHead(const std::filesystem::path& mesh, const std::filesystem::path& albedo,
+                            const std::filesystem::path& displacement, const ScannedHeadOptions& options);
+
+}  // namespace crease
