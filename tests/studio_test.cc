@@ -5,11 +5,14 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
 
 #include "core/file_util.h"
 #include "core/json_io.h"
 #include "core/rig_import.h"
+#include "core/image_io.h"
 #include "synth/dataset.h"
+#include "synth/procedural_rig.h"
 #include "tests/test_util.h"
 
 namespace crease {
@@ -120,6 +123,37 @@ TEST(Studio, SequenceDatasetIsCompleteDeterministicAndRebuildable) {
   EXPECT_EQ(lr.frames, 1);
   ASSERT_FALSE(lr.warnings.empty());
   EXPECT_NE(lr.warnings[0].find("browOuterUp"), std::string::npos);
+}
+
+// Golden image of the procedural rig's neutral face (one actor) under a directional
+// light; regenerate with CREASE_UPDATE_GOLDEN=1 after an intended change, and look at it.
+TEST(Studio, NeutralFaceGoldenImage) {
+  const FaceRig rig = BuildProceduralRig();
+  const Actor actor = GenerateActor(rig, 2, SmallActor());
+  StudioOptions so;
+  so.width = 128;
+  so.height = 96;
+  so.fov_deg = 28;
+  so.sensor.noise = false;
+  const Studio studio(rig, actor, so);
+  LightRig light;
+  light.name = "directional";
+  light.lights.push_back(DirectionalFromAzimuthElevation(30.0, 25.0, 1.0));
+  const StudioFrame f = studio.RenderStill(Eigen::VectorXd::Zero(rig.num_expressions()), SequenceFrame{}, &light,
+                                           nullptr, 1);
+  const cv::Mat got = f.image.srgb8;
+  const fs::path golden = fs::path(__FILE__).parent_path() / "data/golden/studio_neutral_face.png";
+  if (std::getenv("CREASE_UPDATE_GOLDEN") != nullptr) WriteImage(golden, got, {.srgb = false});
+  ASSERT_TRUE(fs::exists(golden)) << golden;
+  const cv::Mat expected = ReadImage(golden, /*srgb=*/false);
+  ASSERT_EQ(expected.size(), got.size());
+  cv::Mat got_f;
+  got.convertTo(got_f, CV_32F, 1.0 / 255.0);
+  const cv::Mat diff = cv::abs(got_f - expected) * 255.0;
+  EXPECT_LT(cv::mean(diff.reshape(1))[0], 1.0) << "mean |difference| in 8-bit levels";
+  EXPECT_LT(cv::countNonZero(diff.reshape(1) > 8.0) / static_cast<double>(diff.total() * 3), 0.01);
+  // The face fills a good part of the frame and is lit.
+  EXPECT_GT(cv::countNonZero(f.render.alpha > 0.5f), static_cast<int>(0.3 * got.total()));
 }
 
 }  // namespace
