@@ -26,7 +26,7 @@ void RealismCheckOptions::Check() const {
   CheckGe("RealismCheckOptions", "actors", actors, 1);
   Require(!lights.empty() && !yaws_deg.empty() && !expressions.empty(),
           "RealismCheckOptions: lights, yaws_deg and expressions must not be empty");
-  for (const auto& l : lights) MakeLightRig(l);
+  for (const auto& l : lights) LightRigFromSpec(l);
   studio.Check();
   actor.Check();
 }
@@ -44,8 +44,9 @@ RealismCheckReport RunRealismCheck(const FaceRig& rig, const RealismCheckOptions
     const uint64_t seed = options.seed + static_cast<uint64_t>(a);
     const Actor actor = GenerateActor(rig, seed, options.actor);
     const Studio studio(rig, actor, options.studio);
-    for (const auto& light_name : options.lights) {
-      const LightRig lights = MakeLightRig(light_name);
+    for (const auto& light_spec : options.lights) {
+      const LightRig lights = LightRigFromSpec(light_spec);
+      const std::string light_name = std::filesystem::path(light_spec).stem().string();
       for (double yaw : options.yaws_deg) {
         for (const auto& expr : options.expressions) {
           SequenceFrame pose;

@@ -211,7 +211,8 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
   options.studio.Check();
   Require(!actor_seeds.empty(), "scan set: no actors");
   Require(options.cameras >= 1, "ScanSetOptions.cameras must be >= 1");
-  for (const auto& l : options.light_rigs) MakeLightRig(l);
+  std::vector<LightRig> light_rigs;
+  for (const auto& l : options.light_rigs) light_rigs.push_back(LightRigFromSpec(l));
   std::vector<Eigen::VectorXd> expressions = {Eigen::VectorXd::Zero(rig.num_expressions())};
   std::vector<std::string> names = {"neutral"};
   for (const auto& spec : options.expressions) {
@@ -255,8 +256,9 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
           const Camera cam = LookAtCamera(front.intrinsics, eye, centre_in_head, Eigen::Vector3d::UnitY());
           WriteCamera(sdir / fmt::format("cam{}.json", c), cam);
           cams.push_back(fmt::format("cam{}.json", c));
-          for (const auto& light_name : options.light_rigs) {
-            const LightRig lights = MakeLightRig(light_name);
+          for (size_t li = 0; li < options.light_rigs.size(); ++li) {
+            const LightRig& lights = light_rigs[li];
+            const std::string light_name = fs::path(options.light_rigs[li]).stem().string();
             const StudioFrame f = studio.RenderStill(expressions[e], SequenceFrame{}, &lights, &cam,
                                                      static_cast<uint64_t>(1000 * e + 10 * c));
             report.render_seconds += f.render.stats.seconds;

@@ -7,10 +7,24 @@
 #include <opencv2/core.hpp>
 
 #include "core/error.h"
+#include "core/file_util.h"
+#include "core/image_io.h"
 #include "core/mesh_ops.h"
 #include "core/mesh_primitives.h"
 
 namespace crease {
+
+LightRig LightRigFromSpec(const std::string& spec) {
+  const std::string ext = LowerExtension(spec);
+  if (ext != ".exr" && ext != ".hdr") return MakeLightRig(spec);
+  LightRig rig;
+  rig.name = spec;
+  EnvironmentLight env;
+  env.map = std::make_shared<const EnvironmentMap>(ReadImage(spec), spec);
+  env.samples = 16;
+  rig.lights.push_back(env);
+  return rig;
+}
 
 void StudioOptions::VisitFields(OptionVisitor& v) {
   v.Field("width", width);
@@ -43,7 +57,7 @@ void StudioOptions::Check() const {
   CheckGe(o, "motion_blur_subframes", motion_blur_subframes, 1);
   CheckGt(o, "shutter", shutter, 0.0);
   CheckLe(o, "shutter", shutter, 1.0);
-  MakeLightRig(light);  // throws for unknown presets, naming them
+  LightRigFromSpec(light);  // throws for unknown presets and unreadable maps, naming them
   sensor.Check();
 }
 
@@ -99,6 +113,7 @@ Studio::~Studio() = default;
 Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& options)
     : options_(options), scene_(std::make_unique<Scene>()) {
   options_.Check();
+  default_lights_ = LightRigFromSpec(options_.light);
   model_ = std::make_unique<ActorModel>(rig, actor);
   Scene& s = *scene_;
   s.rig = rig;
@@ -220,7 +235,7 @@ LightRig Studio::FrameLights(const Sequence& sequence, const SequenceFrame& f) c
   for (const auto& k : sequence.keys) {
     for (const auto& [channel, v] : k.values) keyed = keyed || channel.rfind("light:", 0) == 0;
   }
-  if (!keyed) return MakeLightRig(options_.light);
+  if (!keyed) return default_lights_;
   LightRig rig;
   rig.name = fmt::format("directional az {:.1f} el {:.1f}", f.light_azimuth_deg, f.light_elevation_deg);
   rig.lights.push_back(DirectionalFromAzimuthElevation(f.light_azimuth_deg, f.light_elevation_deg, f.light_intensity));
@@ -270,7 +285,7 @@ StudioFrame Studio::RenderFrame(const Sequence& sequence, int index) const {
 
 StudioFrame Studio::RenderStill(const Eigen::VectorXd& expression, const SequenceFrame& f,
                                 const LightRig* light_override, const Camera* camera_override, uint64_t seed) const {
-  const LightRig lights = light_override ? *light_override : MakeLightRig(options_.light);
+  const LightRig& lights = light_override ? *light_override : default_lights_;
   return Render(expression, f, lights, camera_override ? *camera_override : camera_, false, 0.0, nullptr, seed);
 }
 

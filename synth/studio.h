@@ -34,12 +34,17 @@
 
 namespace crease {
 
+// A light rig by name (a preset of synth/lights.h: front, raking-above, raking-side,
+// studio, studio-env, overcast, window) or a lat-long environment map file (.exr,
+// .hdr: linear radiance, importance sampled). Errors name the preset or the file.
+LightRig LightRigFromSpec(const std::string& spec);
+
 struct StudioOptions {
   int width = 640;                  // image size, pixels (a webcam, as in the paper's capture)
   int height = 480;
   double fov_deg = 50.0;            // horizontal field of view, degrees
   double distance_mm = 450.0;       // camera to face centre, mm
-  std::string light = "studio";     // light rig preset when the sequence keys no light (synth/lights.h)
+  std::string light = "studio";     // light rig when the sequence keys none: a preset or an EXR (LightRigFromSpec)
   double light_fill = 0.15;         // ambient fill under a sequence-driven directional light
   int samples_per_axis = 1;         // anti-aliasing: N×N samples per pixel
   int motion_blur_subframes = 5;    // sub-frames over the shutter when the sequence asks for motion blur
@@ -105,6 +110,7 @@ class Studio {
   std::unique_ptr<ActorModel> model_;
   Camera camera_;
   Eigen::Vector3d head_centre_;
+  LightRig default_lights_;  // options.light, resolved once (environment maps are read once)
   std::unique_ptr<Scene> scene_;
 };
 

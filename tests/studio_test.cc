@@ -125,6 +125,34 @@ TEST(Studio, SequenceDatasetIsCompleteDeterministicAndRebuildable) {
   EXPECT_NE(lr.warnings[0].find("browOuterUp"), std::string::npos);
 }
 
+TEST(Studio, ScanSetHasMeshesCalibratedImagesAndMaps) {
+  const fs::path dir = TestDir();
+  // An environment map from a file works as a light rig wherever a preset does.
+  cv::Mat env(16, 32, CV_32FC3, cv::Scalar(0.3, 0.3, 0.3));
+  env.rowRange(0, 4) = cv::Scalar(2.0, 2.0, 2.0);
+  WriteImage(dir / "sky.exr", env);
+  ScanSetOptions o;
+  o.studio.width = 96;
+  o.studio.height = 72;
+  o.cameras = 2;
+  o.light_rigs = {"front", (dir / "sky.exr").string()};
+  o.expressions = {"browInnerUp=1"};
+  const DatasetReport r = WriteScanSet(SampleRig(), {21}, SmallActor(), o, dir / "scans");
+  EXPECT_EQ(r.frames, 2);
+  const fs::path a = dir / "scans" / "actor_000";
+  for (const char* scan : {"neutral", "01_browInnerUp"}) {
+    for (const char* f : {"mesh.ply", "truth.json", "expression_displacement.exr", "cam0.json", "cam1.json",
+                          "cam0_front.png", "cam1_sky.png"}) {
+      EXPECT_TRUE(fs::exists(a / scan / f)) << scan << "/" << f;
+    }
+  }
+  EXPECT_TRUE(fs::exists(dir / "scans" / "scans.json"));
+  EXPECT_TRUE(fs::exists(a / "actor.json"));
+  // The two cameras look at the face from different sides.
+  const Camera c0 = ReadCamera(a / "neutral" / "cam0.json"), c1 = ReadCamera(a / "neutral" / "cam1.json");
+  EXPECT_GT((c0.CentreInHead() - c1.CentreInHead()).norm(), 100.0);
+}
+
 // Golden image of the procedural rig's neutral face (one actor) under a directional
 // light; regenerate with CREASE_UPDATE_GOLDEN=1 after an intended change, and look at it.
 TEST(Studio, NeutralFaceGoldenImage) {

@@ -120,7 +120,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
       pose.yaw_deg = yaw;
       pose.pitch_deg = pitch;
       const Eigen::VectorXd w = ParseExpressionSpec(expression, rig);
-      const LightRig lights = MakeLightRig(light);
+      const LightRig lights = LightRigFromSpec(light);
       const StudioFrame f = studio.RenderStill(w, pose, &lights, nullptr, seed);
       cv::Mat srgb;
       f.image.srgb8.convertTo(srgb, CV_8U);
@@ -259,7 +259,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
       RenderOptions ro;
       ro.samples_per_axis = samples;
       Rng rng(seed);
-      const RenderResult img = renderer.Render(camera, MakeLightRig(light), ro, rng);
+      const RenderResult img = renderer.Render(camera, LightRigFromSpec(light), ro, rng);
       const SensorImage sensor = ApplySensor(img.image, studio.sensor, rng);
       cv::Mat srgb;
       sensor.srgb8.convertTo(srgb, CV_8U);
