@@ -8,6 +8,7 @@
 #include <fstream>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
 
 #include "core/error.h"
 #include "core/file_util.h"
@@ -175,6 +176,20 @@ DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const
       if (options.write_maps) {
         WriteImage(dir / "maps" / (FrameName(i) + "_expression_displacement.exr"), frame.actor.expression_displacement);
       }
+      if (options.write_passes) {
+        const fs::path p = dir / "passes";
+        WriteImage(p / (FrameName(i) + "_depth.exr"), frame.render.depth);
+        WriteImage(p / (FrameName(i) + "_normal.exr"), frame.render.normal);
+        cv::Mat uv3;
+        cv::Mat zero = cv::Mat::zeros(frame.render.uv.size(), CV_32FC1);
+        std::vector<cv::Mat> ch;
+        cv::split(frame.render.uv, ch);
+        ch.push_back(zero);
+        cv::merge(ch, uv3);
+        WriteImage(p / (FrameName(i) + "_uv.exr"), uv3);
+        cv::Mat mask = frame.render.triangle_id >= 0;
+        WriteImage(p / (FrameName(i) + "_mask.png"), mask, {.srgb = false});
+      }
       ++report.frames;
       progress.Advance();
     }
@@ -197,6 +212,7 @@ DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const
         {"truth", "truth/{frame:06d}.json"},
         {"vertex_truth", "truth/{frame:06d}_vertices.bin (float32 x, y, visible per coarse vertex)"},
         {"expression_displacement", options.write_maps ? "maps/{frame:06d}_expression_displacement.exr" : ""},
+        {"passes", options.write_passes ? "passes/{frame:06d}_{depth,normal,uv}.exr, passes/{frame:06d}_mask.png" : ""},
         {"static_displacement", "maps/static_displacement.exr"},
         {"mesoscopic_displacement", "maps/mesoscopic_displacement.exr"}};
     ds["units"] = "mm; images linear float in EXR, sRGB 8-bit in PNG; UV v grows downwards";

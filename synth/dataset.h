@@ -21,6 +21,9 @@
 //   maps/static_displacement.exr, maps/mesoscopic_displacement.exr  the actor's
 //                             person-specific medium shape and pores (mm), all frames
 //   maps/albedo.exr, specular.exr, roughness.exr  the actor's skin
+//   passes/NNNNNN_{depth,normal,uv}.exr, NNNNNN_mask.png   optional render passes at
+//                             pixel centres: depth (mm along the camera's z), shading
+//                             normal (camera frame), UV, and where the head is seen
 // The folder is written under a temporary name and renamed when complete.
 //
 // Scan set (`crease synth scans`): per actor a neutral and extreme expressions,
@@ -47,6 +50,7 @@ struct SequenceDatasetOptions {
   StudioOptions studio;
   bool write_exr = false;   // also the noiseless linear frame as EXR
   bool write_maps = true;   // per-frame expression displacement maps
+  bool write_passes = false;  // per-frame render passes: depth, normal, UV (EXR) and the face mask (PNG)
   int first_frame = 0;      // frame range [first_frame, first_frame + max_frames)
   int max_frames = -1;      // -1: all frames of the sequence
   bool overwrite = false;   // replace an existing output folder

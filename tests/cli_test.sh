@@ -43,6 +43,8 @@ ok "synth actor" "$crease" synth actor --rig "$tmp/head.crig" --seed 3 -o "$tmp/
 ok "synth render" "$crease" synth render --rig "$tmp/head.crig" --actor "$tmp/actor.json" -e browInnerUp=1 --light raking-above --size 160x120 --samples 1 -o "$tmp/still.png"
 ok "synth sequence" "$crease" synth sequence --rig "$tmp/head.crig" --actor "$tmp/actor.json" --preset wrinkle-workout --first-frame 30 --frames 2 --size 160x120 -o "$tmp/seq"
 [ -s "$tmp/seq/frames/000031.png" ] && [ -s "$tmp/seq/truth/000031.json" ] || { echo "FAIL: sequence outputs missing"; fails=$((fails+1)); }
+ok "synth sequence motion blur + passes" "$crease" synth sequence --rig "$tmp/head.crig" --actor "$tmp/actor.json" --preset fast-motion --frames 1 --size 160x120 --passes -o "$tmp/blur"
+[ -s "$tmp/blur/passes/000000_depth.exr" ] && [ -s "$tmp/blur/passes/000000_mask.png" ] || { echo "FAIL: passes missing"; fails=$((fails+1)); }
 ok "synth mesh" "$crease" synth mesh --dataset "$tmp/seq" --frame 31 -o "$tmp/frame31.ply"
 bad "sequence exists" "already exists" "$crease" synth sequence --rig "$tmp/head.crig" --actor "$tmp/actor.json" --preset talking --frames 1 --size 160x120 -o "$tmp/seq"
 printf 'keys:\n  - t: 0\n    pose: {yawn: 1}\n' > "$tmp/bad.yaml"

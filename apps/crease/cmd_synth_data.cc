@@ -137,7 +137,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
     static std::string rig_path, actor_file, preset, script, out, size, light;
     static uint64_t actor_seed = 1, noise_seed = 1;
     static int frames = -1, first = 0, samples = 1;
-    static bool exr = false, no_maps = false, overwrite = false;
+    static bool exr = false, no_maps = false, overwrite = false, passes = false;
     static double seconds = 0;
     cmd->add_option("--rig", rig_path, "Rig (.crig)")->required();
     cmd->add_option("--actor", actor_file, "Actor definition (.json)");
@@ -154,6 +154,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_option("--seed", noise_seed, "Sensor noise seed")->capture_default_str();
     cmd->add_flag("--exr", exr, "Also write the noiseless linear frames (EXR)");
     cmd->add_flag("--no-maps", no_maps, "Do not write the per-frame displacement maps");
+    cmd->add_flag("--passes", passes, "Also write depth, normal, UV (EXR) and mask (PNG) passes per frame");
     cmd->add_flag("--overwrite", overwrite, "Replace an existing output folder");
     cmd->add_option("--out,-o", out, "Output dataset folder")->required();
     cmd->callback([] {
@@ -168,6 +169,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
       o.studio.seed = noise_seed;
       o.write_exr = exr;
       o.write_maps = !no_maps;
+      o.write_passes = passes;
       o.first_frame = first;
       o.max_frames = frames;
       o.overwrite = overwrite;
