@@ -1,12 +1,15 @@
 #!/usr/bin/env bash
 # crease's main job. Installs what is missing, builds Release, then runs the most
-# complete thing crease does today, end to end on the bundled sample rig:
-#   1. import a blendshape OBJ folder (quads, cm, per-corner UVs with a seam,
-#      68 landmarks) into a crease rig, deriving the region masks;
-#   2. describe the rig and draw its UV layout with regions and landmarks;
-#   3. evaluate an expression and write it as PLY and as VTP with per-vertex fields;
-#   4. ray-trace shaded previews (Embree) of the expression, plain and coloured by
-#      displacement from the neutral.
+# complete thing crease does today, end to end:
+#   1. imports the bundled blendshape OBJ folder (quads, cm, per-corner UVs with a
+#      seam, 68 landmarks) into a crease rig, with derived region masks, and
+#      ray-traces a preview of an expression;
+#   2. builds the studio's procedural head rig and a seeded actor;
+#   3. renders a brow raise under raking light and under front light (the forehead
+#      wrinkles show under the first and fade under the second);
+#   4. renders the first seconds of the `wrinkle-workout` performance with per-frame
+#      ground truth (landmarks, rig parameters, displacement maps);
+#   5. rebuilds the high-resolution ground-truth surface of one frame.
 # Outputs go to ${CREASE_OUT:-out/quickstart}.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -32,8 +35,24 @@ step "ray-tracing previews"
 "$crease" mesh render "$out/expression.ply" -o "$out/expression.png"
 "$crease" mesh render "$out/expression.vtp" --field displacement_magnitude_mm -o "$out/expression_displacement.png"
 
+step "building the studio's procedural head rig and actor 7"
+"$crease" synth rig -o "$out/head.crig" --preview "$out/head_rig.png"
+"$crease" synth actor --rig "$out/head.crig" --seed 7 -o "$out/actor7.json"
+step "a brow raise under raking light and under front light"
+"$crease" synth render --rig "$out/head.crig" --actor "$out/actor7.json" -e browInnerUp=1,browOuterUp=1 \
+  --light raking-above --pitch 28 --fov 30 -o "$out/brow_raise_raking.png"
+"$crease" synth render --rig "$out/head.crig" --actor "$out/actor7.json" -e browInnerUp=1,browOuterUp=1 \
+  --light front --pitch 28 --fov 30 -o "$out/brow_raise_front.png"
+step "rendering 2 s of the wrinkle-workout performance with ground truth"
+"$crease" synth sequence --rig "$out/head.crig" --actor "$out/actor7.json" --preset wrinkle-workout \
+  --frames 60 --overwrite -o "$out/wrinkle_workout"
+"$crease" synth mesh --dataset "$out/wrinkle_workout" --frame 33 -o "$out/frame33_hires.ply"
+
 step "done. Outputs:"
-for f in sample.crig rig_regions.png expression.vtp expression.ply expression.png expression_displacement.png; do
+for f in sample.crig rig_regions.png expression.vtp expression.png expression_displacement.png \
+         head.crig head_rig.png actor7.json brow_raise_raking.png brow_raise_front.png \
+         wrinkle_workout/dataset.json wrinkle_workout/frames/000033.png frame33_hires.ply; do
   printf '  %s\n' "$out/$f"
 done
-printf 'Open the .vtp in ParaView (colour by displacement_magnitude_mm or region) and the .png files in any viewer.\n'
+printf 'Open .vtp and .ply files in ParaView or MeshLab and the .png files in any viewer.\n'
+printf 'The dataset folder is described by its dataset.json and by synth/dataset.h.\n'

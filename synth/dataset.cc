@@ -16,6 +16,7 @@
 #include "core/json_io.h"
 #include "core/mesh_io.h"
 #include "core/progress.h"
+#include "core/timer.h"
 
 namespace crease {
 namespace fs = std::filesystem;
@@ -163,16 +164,22 @@ DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const
     WriteImage(dir / "maps" / "specular.exr", studio.model().skin().specular, {.half = true});
     WriteImage(dir / "maps" / "roughness.exr", studio.model().skin().roughness, {.half = true});
     Progress progress("rendering " + sequence.name, count);
+    TimingReport timing;
     for (int i = first; i < first + count; ++i) {
+      ScopedTimer t_frame(&timing, "render frame (studio)");
       const StudioFrame frame = studio.RenderFrame(sequence, i);
+      t_frame.Stop();
       report.render_seconds += frame.render.stats.seconds;
       report.surface_seconds += frame.actor.seconds;
+      ScopedTimer t_write(&timing, "write frame + truth");
       cv::Mat srgb;
       frame.image.srgb8.convertTo(srgb, CV_8U);
       WriteImage(dir / "frames" / (FrameName(i) + ".png"), srgb, {.srgb = false});
       if (options.write_exr) WriteImage(dir / "frames" / (FrameName(i) + ".exr"), frame.render.image);
       WriteJsonFile(dir / "truth" / (FrameName(i) + ".json"), TruthToJson(frame.truth, rig, actor));
       WriteVertexTruth(dir / "truth" / (FrameName(i) + "_vertices.bin"), frame.truth);
+      t_write.Stop();
+      ScopedTimer t_maps(&timing, "write maps + passes");
       if (options.write_maps) {
         WriteImage(dir / "maps" / (FrameName(i) + "_expression_displacement.exr"), frame.actor.expression_displacement);
       }
@@ -190,9 +197,12 @@ DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const
         cv::Mat mask = frame.render.triangle_id >= 0;
         WriteImage(p / (FrameName(i) + "_mask.png"), mask, {.srgb = false});
       }
+      t_maps.Stop();
       ++report.frames;
       progress.Advance();
     }
+    for (const auto& e : studio.timing().Entries()) timing.Add("  " + e.name, e.total_seconds);
+    report.timing = timing.ToTable();
     json ds;
     ds["format"] = "crease synthetic sequence";
     ds["version"] = 1;

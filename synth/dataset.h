@@ -66,6 +66,7 @@ struct DatasetReport {
   double surface_seconds = 0.0;
   std::string path;
   std::vector<std::string> warnings;
+  std::string timing;  // per-stage time table (core/timer.h)
 };
 
 DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const Sequence& sequence,

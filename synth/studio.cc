@@ -247,7 +247,8 @@ LightRig Studio::FrameLights(const Sequence& sequence, const SequenceFrame& f) c
   return rig;
 }
 
-MatX3d Studio::SceneVertices(const ActorFrame& frame, const SequenceFrame& f, const Rigid3d& world_from_head) const {
+MatX3d Studio::SceneVertices(const ActorFrame& frame, const SequenceFrame& f, const Rigid3d& world_from_head,
+                             MatX3d* normals) const {
   const Scene& s = *scene_;
   const int nr = s.rig.num_vertices(), nu = static_cast<int>(s.underlay_source.size());
   const int total = s.hires_vertices + nr + nu + (s.occluder_first >= 0 ? s.occluder_unit.num_vertices() : 0);
@@ -262,6 +263,17 @@ MatX3d Studio::SceneVertices(const ActorFrame& frame, const SequenceFrame& f, co
   const Eigen::Matrix3d R = world_from_head.rotation.toRotationMatrix();
   const int posed = s.hires_vertices + nr + nu;
   for (int i = 0; i < posed; ++i) V.row(i) = (R * V.row(i).transpose() + world_from_head.translation).transpose();
+  if (normals) {
+    // The layers carry their normals (the hi-res grid's from central differences,
+    // the coarse rig's area-weighted): rotating them is far cheaper than recomputing.
+    MatX3d& Nn = *normals;
+    Nn.resize(total, 3);
+    Nn.topRows(s.hires_vertices) = frame.hires.N;
+    Nn.middleRows(s.hires_vertices, nr) = frame.coarse.N;
+    for (int i = 0; i < nu; ++i) Nn.row(s.hires_vertices + nr + i) = frame.coarse.N.row(s.underlay_source[i]);
+    Nn.topRows(posed) = Nn.topRows(posed) * R.transpose();
+    if (s.occluder_first >= 0) Nn.bottomRows(s.occluder_unit.num_vertices()) = s.occluder_unit.N;
+  }
   if (s.occluder_first >= 0) {
     // Sequences place the occluder relative to the head centre; without one it is parked behind the camera.
     const Eigen::Vector3d c = f.has_occluder ? Eigen::Vector3d(head_centre_ + Eigen::Vector3d(f.occluder_x_mm, f.occluder_y_mm, f.occluder_z_mm))
@@ -294,7 +306,10 @@ StudioFrame Studio::Render(const Eigen::VectorXd& expression, const SequenceFram
                            uint64_t seed) const {
   Scene& s = *scene_;
   StudioFrame out;
+  ScopedTimer t_surface(timing_.get(), "actor surface");
   out.actor = model_->Frame(expression, true);
+  t_surface.Stop();
+  ScopedTimer t_render(timing_.get(), "scene update + render");
   const Rigid3d world_from_head = WorldFromHead(f);
   RenderOptions ro;
   ro.samples_per_axis = options_.samples_per_axis;
@@ -311,10 +326,20 @@ StudioFrame Studio::Render(const Eigen::VectorXd& expression, const SequenceFram
     };
     out.render = RenderMotionBlurred(*s.renderer, frame_at, options_.motion_blur_subframes, lights, ro, rng);
   } else {
-    s.renderer->UpdateGeometry(SceneVertices(out.actor, f, world_from_head));
+    MatX3d N;
+    const MatX3d V = SceneVertices(out.actor, f, world_from_head, &N);
+    if (out.actor.hires.N.rows() == out.actor.hires.V.rows() && N.allFinite()) {
+      s.renderer->UpdateGeometry(V, N);
+    } else {
+      s.renderer->UpdateGeometry(V);
+    }
     out.render = s.renderer->Render(camera, lights, ro, rng);
   }
+  t_render.Stop();
+  ScopedTimer t_sensor(timing_.get(), "sensor");
   out.image = ApplySensor(out.render.image, options_.sensor, rng);
+  t_sensor.Stop();
+  ScopedTimer t_truth(timing_.get(), "ground truth");
 
   // Ground truth: projections of every coarse vertex and landmark, and their visibility
   // from the depth pass (visible = in the image and not behind the rendered surface).

@@ -26,6 +26,7 @@
 #include "core/face_rig.h"
 #include "core/options.h"
 #include "core/rng.h"
+#include "core/timer.h"
 #include "synth/actor.h"
 #include "synth/lights.h"
 #include "synth/renderer.h"
@@ -93,6 +94,8 @@ class Studio {
   const Camera& camera() const { return camera_; }
   const ActorModel& model() const { return *model_; }
   const StudioOptions& options() const { return options_; }
+  // Time spent per stage over all frames rendered so far.
+  const TimingReport& timing() const { return *timing_; }
   // World-from-head transform for a pose.
   Rigid3d WorldFromHead(const SequenceFrame& f) const;
   // The light rig of a frame: the sequence's directional light if it keys one,
@@ -101,7 +104,9 @@ class Studio {
 
  private:
   struct Scene;
-  MatX3d SceneVertices(const ActorFrame& frame, const SequenceFrame& f, const Rigid3d& world_from_head) const;
+  // Scene positions (and, when `normals` is given, unit normals) of a frame.
+  MatX3d SceneVertices(const ActorFrame& frame, const SequenceFrame& f, const Rigid3d& world_from_head,
+                       MatX3d* normals = nullptr) const;
   StudioFrame Render(const Eigen::VectorXd& expression, const SequenceFrame& f, const LightRig& lights,
                      const Camera& camera, bool motion_blur, double frame_dt, const Sequence* sequence,
                      uint64_t seed) const;
@@ -110,7 +115,8 @@ class Studio {
   std::unique_ptr<ActorModel> model_;
   Camera camera_;
   Eigen::Vector3d head_centre_;
-  LightRig default_lights_;  // options.light, resolved once (environment maps are read once)
+  LightRig default_lights_;
+  std::unique_ptr<TimingReport> timing_ = std::make_unique<TimingReport>();  // options.light, resolved once (environment maps are read once)
   std::unique_ptr<Scene> scene_;
 };
 

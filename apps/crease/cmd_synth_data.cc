@@ -176,6 +176,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
       o.ignore_missing_expressions = !preset.empty();
       const DatasetReport r = WriteSequenceDataset(rig, actor, seq, o, out);
       for (const auto& w : r.warnings) std::printf("warning: %s\n", w.c_str());
+      std::printf("%s", r.timing.c_str());
       std::printf("wrote %s: %d frames of '%s' in %.1f s (render %.1f s, surfaces %.1f s)\n", out.c_str(), r.frames,
                   seq.name.c_str(), r.seconds, r.render_seconds, r.surface_seconds);
     });
