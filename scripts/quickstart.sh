@@ -35,22 +35,22 @@ step "ray-tracing previews"
 "$crease" mesh render "$out/expression.ply" -o "$out/expression.png"
 "$crease" mesh render "$out/expression.vtp" --field displacement_magnitude_mm -o "$out/expression_displacement.png"
 
-step "building the studio's procedural head rig and actor 7"
+step "building the studio's procedural head rig and actor 1 (an older actor: many, deep lines)"
 "$crease" synth rig -o "$out/head.crig" --preview "$out/head_rig.png"
-"$crease" synth actor --rig "$out/head.crig" --seed 7 -o "$out/actor7.json"
+"$crease" synth actor --rig "$out/head.crig" --seed 1 -o "$out/actor1.json"
 step "a brow raise under raking light and under front light"
-"$crease" synth render --rig "$out/head.crig" --actor "$out/actor7.json" -e browInnerUp=1,browOuterUp=1 \
+"$crease" synth render --rig "$out/head.crig" --actor "$out/actor1.json" -e browInnerUp=1,browOuterUp=1 \
   --light raking-above --pitch 28 --fov 30 -o "$out/brow_raise_raking.png"
-"$crease" synth render --rig "$out/head.crig" --actor "$out/actor7.json" -e browInnerUp=1,browOuterUp=1 \
+"$crease" synth render --rig "$out/head.crig" --actor "$out/actor1.json" -e browInnerUp=1,browOuterUp=1 \
   --light front --pitch 28 --fov 30 -o "$out/brow_raise_front.png"
 step "rendering 2 s of the wrinkle-workout performance with ground truth"
-"$crease" synth sequence --rig "$out/head.crig" --actor "$out/actor7.json" --preset wrinkle-workout \
+"$crease" synth sequence --rig "$out/head.crig" --actor "$out/actor1.json" --preset wrinkle-workout \
   --frames 60 --overwrite -o "$out/wrinkle_workout"
 "$crease" synth mesh --dataset "$out/wrinkle_workout" --frame 33 -o "$out/frame33_hires.ply"
 
 step "done. Outputs:"
 for f in sample.crig rig_regions.png expression.vtp expression.png expression_displacement.png \
-         head.crig head_rig.png actor7.json brow_raise_raking.png brow_raise_front.png \
+         head.crig head_rig.png actor1.json brow_raise_raking.png brow_raise_front.png \
          wrinkle_workout/dataset.json wrinkle_workout/frames/000033.png frame33_hires.ply; do
   printf '  %s\n' "$out/$f"
 done
