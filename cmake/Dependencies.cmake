@@ -25,6 +25,7 @@ crease_require(OpenImageIO "libopenimageio-dev openimageio-tools" 2.4)
 crease_require(VTK libvtk9-dev 9 COMPONENTS CommonCore CommonDataModel IOXML)
 crease_require(Ceres "libceres-dev libgoogle-glog-dev libsuitesparse-dev" 2)
 crease_require(dlib "libdlib-dev libdlib-data")
+crease_require(TinyGLTF libtinygltf-dev)
 
 if(CREASE_BUILD_TESTS)
   crease_require(GTest libgtest-dev)

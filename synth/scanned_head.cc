@@ -1,8 +1,11 @@
 #include "synth/scanned_head.h"
 
+#include <cstring>
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+
+#include <tiny_gltf.h>
 
 #include "core/error.h"
 #include "core/face_rig.h"
@@ -32,21 +35,150 @@ void ScannedHeadOptions::Check() const {
   CheckLe(o, "phong_alpha", phong_alpha, 1.0);
 }
 
+namespace {
+
+// Reads `count` elements of an accessor as doubles (`components` each).
+std::vector<double> ReadAccessor(const tinygltf::Model& model, int index, int components, const std::string& what,
+                                 const char* name) {
+  Require(index >= 0 && index < static_cast<int>(model.accessors.size()),
+          fmt::format("{}: {} refers to a missing accessor {}", what, name, index));
+  const tinygltf::Accessor& acc = model.accessors[index];
+  Require(tinygltf::GetNumComponentsInType(acc.type) == components,
+          fmt::format("{}: {} must have {} components per element", what, name, components));
+  Require(acc.bufferView >= 0 && acc.bufferView < static_cast<int>(model.bufferViews.size()),
+          fmt::format("{}: {} has no buffer view (sparse accessors are not supported)", what, name));
+  const tinygltf::BufferView& view = model.bufferViews[acc.bufferView];
+  const tinygltf::Buffer& buffer = model.buffers.at(view.buffer);
+  const int csize = tinygltf::GetComponentSizeInBytes(acc.componentType);
+  Require(csize > 0, fmt::format("{}: {} has an unknown component type", what, name));
+  const size_t stride = view.byteStride > 0 ? view.byteStride : static_cast<size_t>(csize * components);
+  const size_t start = view.byteOffset + acc.byteOffset;
+  Require(acc.count == 0 || start + stride * (acc.count - 1) + static_cast<size_t>(csize * components) <= buffer.data.size(),
+          fmt::format("{}: {} runs past the end of its buffer", what, name));
+  std::vector<double> out(acc.count * components);
+  for (size_t i = 0; i < acc.count; ++i) {
+    const unsigned char* p = buffer.data.data() + start + i * stride;
+    for (int c = 0; c < components; ++c) {
+      const unsigned char* q = p + c * csize;
+      double v = 0;
+      switch (acc.componentType) {
+        case TINYGLTF_COMPONENT_TYPE_FLOAT: { float f; std::memcpy(&f, q, 4); v = f; break; }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: { uint32_t u; std::memcpy(&u, q, 4); v = u; break; }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t u; std::memcpy(&u, q, 2); v = acc.normalized ? u / 65535.0 : u; break; }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: { v = acc.normalized ? *q / 255.0 : *q; break; }
+        default: throw Error(fmt::format("{}: {} has an unsupported component type {}", what, name, acc.componentType));
+      }
+      out[i * components + c] = v;
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+TriMesh ReadGltfMesh(const std::filesystem::path& path, cv::Mat* base_color) {
+  RequireReadableFile(path);
+  const std::string what = path.string();
+  tinygltf::Model model;
+  tinygltf::TinyGLTF loader;
+  std::string err, warn;
+  const bool ok = LowerExtension(path) == ".glb" ? loader.LoadBinaryFromFile(&model, &err, &warn, what)
+                                                  : loader.LoadASCIIFromFile(&model, &err, &warn, what);
+  Require(ok, fmt::format("{}: cannot read glTF: {}", what, err.empty() ? warn : err));
+  std::vector<Eigen::Vector3d> V;
+  std::vector<Eigen::Vector2d> UV;
+  std::vector<Eigen::Vector3i> F;
+  int material = -1;
+  for (const auto& mesh : model.meshes) {
+    for (const auto& prim : mesh.primitives) {
+      if (prim.mode != TINYGLTF_MODE_TRIANGLES) continue;
+      auto pos = prim.attributes.find("POSITION");
+      auto tex = prim.attributes.find("TEXCOORD_0");
+      Require(pos != prim.attributes.end(), fmt::format("{}: a primitive of mesh '{}' has no POSITION", what, mesh.name));
+      Require(tex != prim.attributes.end(),
+              fmt::format("{}: mesh '{}' has no texture coordinates (TEXCOORD_0); crease needs a UV layout", what, mesh.name));
+      const std::vector<double> p = ReadAccessor(model, pos->second, 3, what, "POSITION");
+      const std::vector<double> t = ReadAccessor(model, tex->second, 2, what, "TEXCOORD_0");
+      Require(p.size() / 3 == t.size() / 2, fmt::format("{}: POSITION and TEXCOORD_0 differ in length", what));
+      const int base = static_cast<int>(V.size());
+      for (size_t i = 0; i < p.size() / 3; ++i) {
+        V.emplace_back(1000.0 * p[3 * i], 1000.0 * p[3 * i + 1], 1000.0 * p[3 * i + 2]);  // metres → mm
+        UV.emplace_back(t[2 * i], t[2 * i + 1]);  // glTF's v already grows downwards
+      }
+      const int n = static_cast<int>(p.size() / 3);
+      if (prim.indices >= 0) {
+        const std::vector<double> idx = ReadAccessor(model, prim.indices, 1, what, "indices");
+        Require(idx.size() % 3 == 0, fmt::format("{}: triangle indices are not a multiple of 3", what));
+        for (size_t i = 0; i < idx.size(); i += 3) {
+          F.emplace_back(base + static_cast<int>(idx[i]), base + static_cast<int>(idx[i + 1]), base + static_cast<int>(idx[i + 2]));
+        }
+      } else {
+        for (int i = 0; i + 2 < n; i += 3) F.emplace_back(base + i, base + i + 1, base + i + 2);
+      }
+      if (material < 0) material = prim.material;
+    }
+  }
+  Require(!F.empty(), fmt::format("{}: the file has no triangle primitives", what));
+  TriMesh m;
+  m.V.resize(static_cast<int>(V.size()), 3);
+  m.UV.resize(static_cast<int>(UV.size()), 2);
+  m.F.resize(static_cast<int>(F.size()), 3);
+  for (size_t i = 0; i < V.size(); ++i) {
+    m.V.row(static_cast<int>(i)) = V[i].transpose();
+    m.UV.row(static_cast<int>(i)) = UV[i].transpose();
+  }
+  for (size_t f = 0; f < F.size(); ++f) m.F.row(static_cast<int>(f)) = F[f].transpose();
+  ValidateMesh(m, what, {.uv = true});
+  if (base_color) {
+    *base_color = cv::Mat();
+    if (material >= 0 && material < static_cast<int>(model.materials.size())) {
+      const int tex_index = model.materials[material].pbrMetallicRoughness.baseColorTexture.index;
+      if (tex_index >= 0 && tex_index < static_cast<int>(model.textures.size())) {
+        const int source = model.textures[tex_index].source;
+        Require(source >= 0 && source < static_cast<int>(model.images.size()),
+                fmt::format("{}: the base colour texture has no image", what));
+        const tinygltf::Image& img = model.images[source];
+        Require(img.bits == 8 && img.component >= 3 && !img.image.empty(),
+                fmt::format("{}: the base colour image must be 8-bit RGB(A)", what));
+        cv::Mat rgba(img.height, img.width, CV_8UC(img.component), const_cast<unsigned char*>(img.image.data()));
+        cv::Mat rgb;
+        if (img.component == 4) {
+          cv::cvtColor(rgba, rgb, cv::COLOR_RGBA2RGB);
+        } else {
+          rgb = rgba.clone();
+        }
+        rgb.convertTo(*base_color, CV_32FC3, 1.0 / 255.0);
+        // sRGB-encoded like every 8-bit colour image: decode to linear.
+        base_color->forEach<cv::Vec3f>([](cv::Vec3f& px, const int*) {
+          for (int k = 0; k < 3; ++k) px[k] = SrgbToLinear(px[k]);
+        });
+      }
+    }
+  }
+  return m;
+}
+
 ScannedHead LoadScannedHead(const std::filesystem::path& mesh_path, const std::filesystem::path& albedo_path,
                             const std::filesystem::path& displacement_path, const ScannedHeadOptions& options) {
   options.Check();
   const std::string ext = LowerExtension(mesh_path);
-  Require(ext == ".obj" || ext == ".ply",
-          fmt::format("{}: scanned heads are read from OBJ or PLY (glTF is not supported yet)", mesh_path.string()));
-  TriMesh scan = ReadMesh(mesh_path);
+  Require(ext == ".obj" || ext == ".ply" || ext == ".gltf" || ext == ".glb",
+          fmt::format("{}: scanned heads are read from OBJ, PLY or glTF (.gltf, .glb)", mesh_path.string()));
+  const bool gltf = ext == ".gltf" || ext == ".glb";
+  cv::Mat embedded_albedo;
+  TriMesh scan = gltf ? ReadGltfMesh(mesh_path, &embedded_albedo) : ReadMesh(mesh_path);
   ValidateMesh(scan, mesh_path.string(), {.uv = true});
-  scan.V *= options.units_to_mm;
-  if (options.flip_v) scan.UV.col(1) = (1.0 - scan.UV.col(1).array()).matrix();
+  if (!gltf) {
+    scan.V *= options.units_to_mm;
+    if (options.flip_v) scan.UV.col(1) = (1.0 - scan.UV.col(1).array()).matrix();
+  }
   scan.N = VertexNormals(scan);
 
   ScannedHead head;
   head.source_vertices = scan.num_vertices();
-  cv::Mat albedo = ReadImage(albedo_path);
+  Require(!albedo_path.empty() || !embedded_albedo.empty(),
+          fmt::format("{}: no albedo texture (give one; only glTF files can carry their own)", mesh_path.string()));
+  cv::Mat albedo = albedo_path.empty() ? embedded_albedo : ReadImage(albedo_path);
   Require(albedo.channels() == 3 || albedo.channels() == 4 || albedo.channels() == 1,
           fmt::format("{}: the albedo texture must be grey, RGB or RGBA", albedo_path.string()));
   if (albedo.channels() == 4) cv::cvtColor(albedo, albedo, cv::COLOR_RGBA2RGB);

@@ -1,5 +1,6 @@
-// A real scanned head as a studio actor (issue 3, part 7): a mesh with UVs (OBJ or
-// PLY), an albedo texture and optionally a displacement map in the same UV layout,
+// A real scanned head as a studio actor (issue 3, part 7): a mesh with UVs (OBJ, PLY
+// or glTF 2.0 .gltf/.glb), an albedo texture (for glTF, the material's base colour
+// texture unless one is given) and optionally a displacement map in the same UV layout,
 // relit by the studio renderer like any synthetic actor. For example a neutral head
 // scan with a 1024² colour map and a 4096² displacement map.
 //
@@ -10,9 +11,13 @@
 //   d = (value − displacement_midlevel) · displacement_scale_mm.
 // Without a displacement map the scan is rendered as it is.
 //
-// Differences from a full importer: normal maps and glTF files are not read yet (a
-// normal map is refused with a clear error rather than ignored); the scan is static
-// (no blendshapes), so it can be relit, posed and rendered, not animated.
+// glTF: positions are metres by the standard (scaled by 1000, `units_to_mm` is not
+// used), UVs already have v downwards (`flip_v` is not used), all triangle
+// primitives of all meshes are read and node transforms are ignored (scans are
+// usually one mesh at the origin).
+//
+// Differences from a full importer: normal maps are not read; the scan is static (no
+// blendshapes), so it can be relit, posed and rendered, not animated.
 #pragma once
 
 #include <filesystem>
@@ -43,8 +48,13 @@ struct ScannedHead {
 };
 
 // Errors name the file and the problem: a mesh without UVs, a texture that cannot be
-// read, a displacement map with several channels.
+// read, a displacement map with several channels. `albedo` may be empty for a glTF
+// file whose material has a base colour texture.
 ScannedHead LoadScannedHead(const std::filesystem::path& mesh, const std::filesystem::path& albedo,
                             const std::filesystem::path& displacement, const ScannedHeadOptions& options);
+
+// The triangles of a glTF 2.0 file (mm) and, when `base_color` is given, its first
+// material's base colour texture (linear RGB float; empty when it has none).
+TriMesh ReadGltfMesh(const std::filesystem::path& path, cv::Mat* base_color = nullptr);
 
 }  // namespace crease

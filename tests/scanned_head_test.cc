@@ -2,7 +2,11 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
+#include <tiny_gltf.h>
+
 #include "core/image_io.h"
+#include "core/mesh_primitives.h"
 #include "core/mesh_io.h"
 #include "core/rig_import.h"
 #include "synth/actor.h"
@@ -53,9 +57,108 @@ TEST(ScannedHead, ReproducesTheStudiosOwnActorSurface) {
   WritePly(dir / "no_uv.ply", no_uv);
   EXPECT_NE(ErrorOf([&] { LoadScannedHead(dir / "no_uv.ply", dir / "albedo.png", "", so); }).find("no UV coordinates"),
             std::string::npos);
-  EXPECT_NE(ErrorOf([&] { LoadScannedHead(dir / "head.gltf", dir / "albedo.png", "", so); }).find("glTF"),
+  EXPECT_NE(ErrorOf([&] { LoadScannedHead(dir / "head.fbx", dir / "albedo.png", "", so); }).find("OBJ, PLY or glTF"),
             std::string::npos);
   EXPECT_NE(ErrorOf([&] { LoadScannedHead(dir / "head.obj", dir / "missing.png", "", so); }).find("missing.png"),
+            std::string::npos);
+}
+
+// A glTF 2.0 file (metres, embedded buffer and base colour image) reads as mm with its texture.
+TEST(ScannedHead, ReadsGltfWithItsBaseColourTexture) {
+  const fs::path dir = TestDir();
+  const TriMesh grid = MakeGrid(3, 3, 0.3, 0.3);  // metres
+  tinygltf::Model model;
+  std::vector<unsigned char> bytes;
+  auto append = [&](const void* data, size_t n) {
+    const size_t off = bytes.size();
+    bytes.resize(off + n);
+    std::memcpy(bytes.data() + off, data, n);
+    return off;
+  };
+  std::vector<float> pos, uv;
+  for (int v = 0; v < grid.num_vertices(); ++v) {
+    for (int k = 0; k < 3; ++k) pos.push_back(static_cast<float>(grid.V(v, k)));
+    for (int k = 0; k < 2; ++k) uv.push_back(static_cast<float>(grid.UV(v, k)));
+  }
+  std::vector<uint32_t> idx(grid.F.data(), grid.F.data() + grid.F.size());
+  const size_t o_pos = append(pos.data(), pos.size() * 4), o_uv = append(uv.data(), uv.size() * 4),
+               o_idx = append(idx.data(), idx.size() * 4);
+  model.buffers.push_back({});
+  model.buffers[0].data = bytes;
+  auto view = [&](size_t off, size_t len) {
+    tinygltf::BufferView v;
+    v.buffer = 0;
+    v.byteOffset = off;
+    v.byteLength = len;
+    model.bufferViews.push_back(v);
+    return static_cast<int>(model.bufferViews.size()) - 1;
+  };
+  auto accessor = [&](int view_index, int type, int component, size_t count, std::vector<double> mn = {},
+                      std::vector<double> mx = {}) {
+    tinygltf::Accessor a;
+    a.bufferView = view_index;
+    a.componentType = component;
+    a.type = type;
+    a.count = count;
+    a.minValues = mn;
+    a.maxValues = mx;
+    model.accessors.push_back(a);
+    return static_cast<int>(model.accessors.size()) - 1;
+  };
+  const int a_pos = accessor(view(o_pos, pos.size() * 4), TINYGLTF_TYPE_VEC3, TINYGLTF_COMPONENT_TYPE_FLOAT,
+                             grid.num_vertices(), {0, 0, 0}, {0.3, 0.3, 0});
+  const int a_uv = accessor(view(o_uv, uv.size() * 4), TINYGLTF_TYPE_VEC2, TINYGLTF_COMPONENT_TYPE_FLOAT, grid.num_vertices());
+  const int a_idx = accessor(view(o_idx, idx.size() * 4), TINYGLTF_TYPE_SCALAR, TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT, idx.size());
+  tinygltf::Image image;
+  image.width = image.height = 4;
+  image.component = 4;
+  image.bits = 8;
+  image.pixel_type = TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
+  image.mimeType = "image/png";
+  image.image.assign(4 * 4 * 4, 0);
+  for (int i = 0; i < 16; ++i) {
+    image.image[4 * i] = 255;      // red
+    image.image[4 * i + 3] = 255;  // opaque
+  }
+  model.images.push_back(image);
+  tinygltf::Texture texture;
+  texture.source = 0;
+  model.textures.push_back(texture);
+  tinygltf::Material material;
+  material.pbrMetallicRoughness.baseColorTexture.index = 0;
+  model.materials.push_back(material);
+  tinygltf::Primitive prim;
+  prim.attributes["POSITION"] = a_pos;
+  prim.attributes["TEXCOORD_0"] = a_uv;
+  prim.indices = a_idx;
+  prim.material = 0;
+  prim.mode = TINYGLTF_MODE_TRIANGLES;
+  tinygltf::Mesh mesh;
+  mesh.primitives.push_back(prim);
+  model.meshes.push_back(mesh);
+  tinygltf::Node node;
+  node.mesh = 0;
+  model.nodes.push_back(node);
+  tinygltf::Scene scene;
+  scene.nodes.push_back(0);
+  model.scenes.push_back(scene);
+  model.defaultScene = 0;
+  model.asset.version = "2.0";
+  tinygltf::TinyGLTF writer;
+  ASSERT_TRUE(writer.WriteGltfSceneToFile(&model, (dir / "head.gltf").string(), true, true, true, false));
+
+  const ScannedHead head = LoadScannedHead(dir / "head.gltf", "", "", ScannedHeadOptions{});
+  ASSERT_EQ(head.surface.num_vertices(), grid.num_vertices());
+  EXPECT_LT((head.surface.V - grid.V * 1000.0).cwiseAbs().maxCoeff(), 1e-3);  // metres → mm (float precision)
+  EXPECT_LT((head.surface.UV - grid.UV).cwiseAbs().maxCoeff(), 1e-6);        // no v flip for glTF
+  ASSERT_EQ(head.materials.albedo.rows, 4);
+  const cv::Vec3f red = head.materials.albedo.at<cv::Vec3f>(1, 1);
+  EXPECT_NEAR(red[0], 1.0f, 1e-6);
+  EXPECT_NEAR(red[1], 0.0f, 1e-6);
+  // A glTF without texture coordinates is refused by name.
+  model.meshes[0].primitives[0].attributes.erase("TEXCOORD_0");
+  ASSERT_TRUE(writer.WriteGltfSceneToFile(&model, (dir / "no_uv.gltf").string(), true, true, true, false));
+  EXPECT_NE(ErrorOf([&] { LoadScannedHead(dir / "no_uv.gltf", "", "", ScannedHeadOptions{}); }).find("TEXCOORD_0"),
             std::string::npos);
 }
 

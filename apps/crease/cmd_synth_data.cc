@@ -221,19 +221,20 @@ void AddSynthDatasetCommands(CLI::App& app) {
 
   // synth render-scan
   {
-    auto* cmd = synth->add_subcommand("render-scan", "Relight a real scanned head (mesh + albedo [+ displacement map])");
+    auto* cmd = synth->add_subcommand("render-scan", "Relight a real scanned head (OBJ/PLY/glTF + albedo [+ displacement map])");
     static std::string mesh, albedo, displacement, units = "mm", light = "studio", size, out;
     static ScannedHeadOptions so;
     static double yaw = 0, fov = 30;
     static int samples = 2;
     static uint64_t seed = 1;
-    cmd->add_option("--mesh", mesh, "Head mesh with UVs (.obj, .ply)")->required();
-    cmd->add_option("--albedo", albedo, "Colour texture in the mesh's UV layout (PNG, EXR, …)")->required();
+    cmd->add_option("--mesh", mesh, "Head mesh with UVs (.obj, .ply, .gltf, .glb)")->required();
+    cmd->add_option("--albedo", albedo, "Colour texture in the mesh's UV layout (PNG, EXR, …); optional for glTF "
+                                        "files with a base colour texture");
     cmd->add_option("--displacement", displacement, "Displacement map in the same UV layout (EXR, PNG)");
     cmd->add_option("--displacement-scale", so.displacement_scale_mm, "mm per unit of the displacement map")->capture_default_str();
     cmd->add_option("--midlevel", so.displacement_midlevel, "Map value of zero displacement (0.5 for 8-bit maps)")->capture_default_str();
     cmd->add_option("--grid", so.grid_resolution, "Resampling grid for the displacement, texels per side")->capture_default_str();
-    cmd->add_option("--units", units, "Units of the mesh coordinates")->check(CLI::IsMember({"mm", "cm", "m"}))->capture_default_str();
+    cmd->add_option("--units", units, "Units of the mesh coordinates (glTF: always metres)")->check(CLI::IsMember({"mm", "cm", "m"}))->capture_default_str();
     cmd->add_flag("--keep-v", [](int64_t) { so.flip_v = false; }, "Do not flip v (the file's v already grows downwards)");
     cmd->add_option("--light", light, "Light rig preset")->capture_default_str();
     cmd->add_option("--yaw", yaw, "Turn the head (degrees)");
