@@ -386,13 +386,14 @@ SignedHit RayCaster::IntersectSigned(const Eigen::Vector3f& origin, const Eigen:
   return impl_->IntersectSigned(origin, direction, max_distance, &context);
 }
 
-void RayCaster::IntersectBatch(const std::vector<Ray>& rays, std::vector<Hit>* hits,
-                               RayCoherence coherence) const {
-  hits->resize(rays.size());
-  const Impl& m = *impl_;
-  Hit* out = hits->data();
+namespace {
+
+// Runs a batch in parallel: 16-ray packets with a coherent context, or single rays.
+// Each ray's result depends on that ray alone, so the thread count does not matter.
+template <class PacketFn, class SingleFn>
+void ForEachRayBatch(size_t num_rays, RayCoherence coherence, const PacketFn& packet, const SingleFn& single) {
   if (coherence == RayCoherence::kCoherent) {
-    const size_t num_packets = (rays.size() + kPacketSize - 1) / kPacketSize;
+    const size_t num_packets = (num_rays + kPacketSize - 1) / kPacketSize;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, num_packets, kPacketsPerTask),
                       [&](const tbb::blocked_range<size_t>& r) {
                         RTCIntersectContext context;
@@ -400,18 +401,29 @@ void RayCaster::IntersectBatch(const std::vector<Ray>& rays, std::vector<Hit>* h
                         context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
                         for (size_t p = r.begin(); p != r.end(); ++p) {
                           const size_t begin = p * kPacketSize;
-                          m.IntersectPacket(rays, begin, std::min(rays.size(), begin + kPacketSize),
-                                            &context, out);
+                          packet(begin, std::min(num_rays, begin + kPacketSize), &context);
                         }
                       });
     return;
   }
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), kRaysPerTask),
-                    [&](const tbb::blocked_range<size_t>& r) {
-                      RTCIntersectContext context;
-                      rtcInitIntersectContext(&context);
-                      for (size_t i = r.begin(); i != r.end(); ++i) out[i] = m.Intersect(rays[i], &context);
-                    });
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, num_rays, kRaysPerTask), [&](const tbb::blocked_range<size_t>& r) {
+    RTCIntersectContext context;
+    rtcInitIntersectContext(&context);
+    for (size_t i = r.begin(); i != r.end(); ++i) single(i, &context);
+  });
+}
+
+}  // namespace
+
+void RayCaster::IntersectBatch(const std::vector<Ray>& rays, std::vector<Hit>* hits,
+                               RayCoherence coherence) const {
+  hits->resize(rays.size());
+  const Impl& m = *impl_;
+  Hit* out = hits->data();
+  ForEachRayBatch(
+      rays.size(), coherence,
+      [&](size_t begin, size_t end, RTCIntersectContext* ctx) { m.IntersectPacket(rays, begin, end, ctx, out); },
+      [&](size_t i, RTCIntersectContext* ctx) { out[i] = m.Intersect(rays[i], ctx); });
 }
 
 void RayCaster::OccludedBatch(const std::vector<Ray>& rays, std::vector<uint8_t>* occluded,
@@ -419,27 +431,10 @@ void RayCaster::OccludedBatch(const std::vector<Ray>& rays, std::vector<uint8_t>
   occluded->resize(rays.size());
   const Impl& m = *impl_;
   uint8_t* out = occluded->data();
-  if (coherence == RayCoherence::kCoherent) {
-    const size_t num_packets = (rays.size() + kPacketSize - 1) / kPacketSize;
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, num_packets, kPacketsPerTask),
-                      [&](const tbb::blocked_range<size_t>& r) {
-                        RTCIntersectContext context;
-                        rtcInitIntersectContext(&context);
-                        context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-                        for (size_t p = r.begin(); p != r.end(); ++p) {
-                          const size_t begin = p * kPacketSize;
-                          m.OccludedPacket(rays, begin, std::min(rays.size(), begin + kPacketSize),
-                                           &context, out);
-                        }
-                      });
-    return;
-  }
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, rays.size(), kRaysPerTask),
-                    [&](const tbb::blocked_range<size_t>& r) {
-                      RTCIntersectContext context;
-                      rtcInitIntersectContext(&context);
-                      for (size_t i = r.begin(); i != r.end(); ++i) out[i] = m.Occluded(rays[i], &context) ? 1 : 0;
-                    });
+  ForEachRayBatch(
+      rays.size(), coherence,
+      [&](size_t begin, size_t end, RTCIntersectContext* ctx) { m.OccludedPacket(rays, begin, end, ctx, out); },
+      [&](size_t i, RTCIntersectContext* ctx) { out[i] = m.Occluded(rays[i], ctx) ? 1 : 0; });
 }
 
 void RayCaster::IntersectSignedBatch(const std::vector<Eigen::Vector3f>& origins,

@@ -26,14 +26,7 @@ namespace fs = std::filesystem;
 using testing::TestDir;
 using testing::WriteText;
 
-const FaceRig& SampleRig() {
-  static const FaceRig rig = [] {
-    RigImportOptions opt;
-    opt.units_to_mm = 10.0;
-    return ImportObjRig(fs::path(CREASE_DATA_DIR) / "sample_rig", opt);
-  }();
-  return rig;
-}
+using testing::SampleRig;
 
 Eigen::VectorXd Weights(const FaceRig& rig, const std::vector<std::pair<std::string, double>>& w) {
   Eigen::VectorXd e = Eigen::VectorXd::Zero(rig.num_expressions());

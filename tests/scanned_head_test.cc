@@ -23,9 +23,7 @@ using testing::TestDir;
 // high-resolution neutral surface.
 TEST(ScannedHead, ReproducesTheStudiosOwnActorSurface) {
   const fs::path dir = TestDir();
-  RigImportOptions ro;
-  ro.units_to_mm = 10.0;
-  const FaceRig rig = ImportObjRig(fs::path(CREASE_DATA_DIR) / "sample_rig", ro);
+  const FaceRig& rig = testing::SampleRig();
   ActorOptions ao;
   ao.resolution = 256;
   ao.surface_min_vertices = 0;

@@ -21,14 +21,7 @@ namespace fs = std::filesystem;
 using testing::ErrorOf;
 using testing::TestDir;
 
-const FaceRig& SampleRig() {
-  static const FaceRig rig = [] {
-    RigImportOptions o;
-    o.units_to_mm = 10.0;
-    return ImportObjRig(fs::path(CREASE_DATA_DIR) / "sample_rig", o);
-  }();
-  return rig;
-}
+using testing::SampleRig;
 
 ActorOptions SmallActor() {
   ActorOptions o;

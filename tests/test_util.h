@@ -9,6 +9,7 @@
 #include <string>
 
 #include "core/error.h"
+#include "core/rig_import.h"
 
 namespace crease::testing {
 
@@ -35,6 +36,16 @@ inline std::filesystem::path TestDir() {
 inline void WriteText(const std::filesystem::path& path, const std::string& text) {
   std::ofstream out(path, std::ios::binary);
   out << text;
+}
+
+// The bundled sample rig (data/sample_rig: a blendshape OBJ folder in cm), imported once.
+inline const FaceRig& SampleRig() {
+  static const FaceRig rig = [] {
+    RigImportOptions options;
+    options.units_to_mm = 10.0;
+    return ImportObjRig(std::filesystem::path(CREASE_DATA_DIR) / "sample_rig", options);
+  }();
+  return rig;
 }
 
 }  // namespace crease::testing
