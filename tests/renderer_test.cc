@@ -138,7 +138,7 @@ TEST(Renderer, StudioGoldenImage) {
   Rng rng(7);
   const RenderResult r = renderer.Render(cam, MakeLightRig("studio"), options, rng);
   const cv::Mat got = EncodeSrgb8(r.image);
-  const std::filesystem::path golden = std::filesystem::path(__FILE__).parent_path() / "data/golden/studio_sphere.png";
+  const std::filesystem::path golden = std::filesystem::path(CREASE_TEST_DIR) / "data/golden/studio_sphere.png";
   if (std::getenv("CREASE_UPDATE_GOLDEN") != nullptr) {
     std::filesystem::create_directories(golden.parent_path());
     WriteImage(golden, got, ImageWriteOptions{.srgb = false});

@@ -163,7 +163,7 @@ TEST(Studio, NeutralFaceGoldenImage) {
   const StudioFrame f = studio.RenderStill(Eigen::VectorXd::Zero(rig.num_expressions()), SequenceFrame{}, &light,
                                            nullptr, 1);
   const cv::Mat got = f.image.srgb8;
-  const fs::path golden = fs::path(__FILE__).parent_path() / "data/golden/studio_neutral_face.png";
+  const fs::path golden = fs::path(CREASE_TEST_DIR) / "data/golden/studio_neutral_face.png";
   if (std::getenv("CREASE_UPDATE_GOLDEN") != nullptr) WriteImage(golden, got, {.srgb = false});
   ASSERT_TRUE(fs::exists(golden)) << golden;
   const cv::Mat expected = ReadImage(golden, /*srgb=*/false);
