@@ -55,6 +55,8 @@ printf '{"version": 1}' > "$tmp/bad_actor.json"
 bad "bad actor" "bad_actor.json" "$crease" synth render --rig "$tmp/head.crig" --actor "$tmp/bad_actor.json" -o "$tmp/x.png"
 ok "render-scan" "$crease" synth render-scan --mesh "$tmp/e.obj" --albedo "$tmp/regions.png" --units mm --size 160x120 --samples 1 -o "$tmp/scan.png"
 bad "render-scan without texture" "tex.png: file does not exist" "$crease" synth render-scan --mesh "$tmp/e.obj" --albedo "$tmp/tex.png" -o "$tmp/x.png"
+bad "unknown actor option" "unknown option 'nope'" "$crease" synth actor --rig "$tmp/head.crig" --set nope=1 -o "$tmp/x.json"
+bad "bad studio option" "StudioOptions.distance_mm" "$crease" synth sequence --rig "$tmp/head.crig" --actor "$tmp/actor.json" --preset talking --frames 1 --set distance_mm=5 -o "$tmp/seq3"
 bad "frame not in dataset" "not in this dataset" "$crease" synth mesh --dataset "$tmp/seq" --frame 7 -o "$tmp/x.ply"
 
 bad "missing mesh" "nope.ply: file does not exist" "$crease" mesh info "$tmp/nope.ply"

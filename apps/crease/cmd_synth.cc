@@ -15,21 +15,6 @@ namespace crease::app {
 
 namespace {
 
-// "KEY=VALUE" pairs → a JSON object; VALUE is parsed as JSON (numbers, booleans,
-// lists) and otherwise taken as a string.
-std::string SetPairsToJson(const std::vector<std::string>& pairs) {
-  nlohmann::json j = nlohmann::json::object();
-  for (const auto& p : pairs) {
-    const auto eq = p.find('=');
-    if (eq == std::string::npos || eq == 0) throw Error(fmt::format("--set '{}': expected KEY=VALUE", p));
-    const std::string value = p.substr(eq + 1);
-    nlohmann::json v = nlohmann::json::parse(value, nullptr, /*allow_exceptions=*/false);
-    if (v.is_discarded()) v = value;
-    j[p.substr(0, eq)] = v;
-  }
-  return j.dump();
-}
-
 // A contact sheet of the rig: neutral from the front, three-quarter and side, and
 // a few expressions, each tile `tile` pixels square, coloured by part.
 cv::Mat RigContactSheet(const FaceRig& rig, int tile) {

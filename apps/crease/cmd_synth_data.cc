@@ -64,9 +64,13 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_option("--out,-o", out, "Actor definition (.json)")->required();
     cmd->add_option("--maps", maps, "Also write the actor's maps (displacement layers, skin) to this folder");
     cmd->add_option("--preview", preview, "Also render a preview (PNG) under the studio light");
+    static std::vector<std::string> sets;
+    cmd->add_option("--set", sets, "Actor option KEY=VALUE (repeatable; synth/actor.h ActorOptions), e.g. age_min=0.8");
     cmd->callback([] {
       const FaceRig rig = ReadRig(rig_path);
-      const Actor actor = GenerateActor(rig, seed);
+      ActorOptions ao;
+      if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &ao);
+      const Actor actor = GenerateActor(rig, seed, ao);
       WriteActor(out, actor);
       std::printf("wrote %s (seed %llu, %zu wrinkle lines)\n", out.c_str(), static_cast<unsigned long long>(seed),
                   actor.wrinkles.size());
@@ -157,6 +161,9 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_flag("--passes", passes, "Also write depth, normal, UV (EXR) and mask (PNG) passes per frame");
     cmd->add_flag("--overwrite", overwrite, "Replace an existing output folder");
     cmd->add_option("--out,-o", out, "Output dataset folder")->required();
+    static std::vector<std::string> sets;
+    cmd->add_option("--set", sets, "Studio option KEY=VALUE (repeatable; synth/studio.h StudioOptions and the sensor's "
+                                   "SensorOptions), e.g. distance_mm=600 jpeg_quality=70");
     cmd->callback([] {
       if (preset.empty() == script.empty()) throw Error("give exactly one of --preset and --script");
       const FaceRig rig = ReadRig(rig_path);
@@ -167,6 +174,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
       if (!light.empty()) o.studio.light = light;
       o.studio.samples_per_axis = samples;
       o.studio.seed = noise_seed;
+      if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &o.studio);
       o.write_exr = exr;
       o.write_maps = !no_maps;
       o.write_passes = passes;

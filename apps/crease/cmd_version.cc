@@ -13,8 +13,22 @@
 #include <vtkVersionMacros.h>
 
 #include "apps/crease/commands.h"
+#include "core/error.h"
 
 namespace crease::app {
+
+std::string SetPairsToJson(const std::vector<std::string>& pairs) {
+  nlohmann::json j = nlohmann::json::object();
+  for (const auto& p : pairs) {
+    const auto eq = p.find('=');
+    if (eq == std::string::npos || eq == 0) throw Error(fmt::format("--set '{}': expected KEY=VALUE", p));
+    const std::string value = p.substr(eq + 1);
+    nlohmann::json v = nlohmann::json::parse(value, nullptr, /*allow_exceptions=*/false);
+    if (v.is_discarded()) v = value;
+    j[p.substr(0, eq)] = v;
+  }
+  return j.dump();
+}
 
 void AddVersionCommand(CLI::App& app) {
   auto* cmd = app.add_subcommand("version", "Print crease's version and the libraries it was built with");

@@ -4,8 +4,15 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <string>
+#include <vector>
 
 namespace crease::app {
+
+// "KEY=VALUE" pairs (from repeatable --set flags) → a JSON object for
+// SetOptionsFromJson; VALUE is parsed as JSON (numbers, booleans, lists) and
+// otherwise taken as a string.
+std::string SetPairsToJson(const std::vector<std::string>& pairs);
 
 void AddVersionCommand(CLI::App& app);
 void AddMeshCommands(CLI::App& app);
