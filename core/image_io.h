@@ -12,6 +12,8 @@
 #include <filesystem>
 #include <opencv2/core/mat.hpp>
 
+#include "core/color.h"  // SrgbToLinear, LinearToSrgb
+
 namespace crease {
 
 struct ImageWriteOptions {
@@ -31,8 +33,5 @@ cv::Mat ReadImage(const std::filesystem::path& path, bool srgb = true);
 void WriteImage(const std::filesystem::path& path, const cv::Mat& image,
                 const ImageWriteOptions& options = {});
 
-// sRGB transfer functions (IEC 61966-2-1), per channel value.
-float SrgbToLinear(float v);
-float LinearToSrgb(float v);
 
 }  // namespace crease

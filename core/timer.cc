@@ -5,15 +5,15 @@
 
 namespace crease {
 
-void TimingReport::Add(const std::string& name, double seconds) {
+void TimingReport::Add(const std::string& name, double seconds, int calls) {
   std::lock_guard<std::mutex> lock(mutex_);
   auto it = index_.find(name);
   if (it == index_.end()) {
     index_.emplace(name, entries_.size());
-    entries_.push_back({name, seconds, 1});
+    entries_.push_back({name, seconds, calls});
   } else {
     entries_[it->second].total_seconds += seconds;
-    entries_[it->second].count += 1;
+    entries_[it->second].count += calls;
   }
 }
 

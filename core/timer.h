@@ -23,7 +23,8 @@ class TimingReport {
     double mean_ms() const { return count ? 1e3 * total_seconds / count : 0.0; }
   };
 
-  void Add(const std::string& name, double seconds);
+  // Adds `seconds` spent over `calls` calls of stage `name`.
+  void Add(const std::string& name, double seconds, int calls = 1);
   // Entries in order of first appearance.
   std::vector<Entry> Entries() const;
   double TotalSeconds() const;

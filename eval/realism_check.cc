@@ -115,7 +115,7 @@ std::string RealismCheckReport::ToTable() const {
   };
   std::map<std::string, Acc> by;
   for (const auto& r : rows) {
-    for (const std::string key : {fmt::format("light {}", r.light), fmt::format("yaw {:+.0f}", r.yaw_deg),
+    for (const std::string& key : {fmt::format("light {}", r.light), fmt::format("yaw {:+.0f}", r.yaw_deg),
                                   fmt::format("expr {}", r.expression)}) {
       Acc& a = by[key];
       ++a.n;

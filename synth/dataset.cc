@@ -122,25 +122,20 @@ DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const
   input_sequence.Validate(input_sequence.name);
   options.studio.Check();
   DatasetReport report;
+  // Expressions the rig lacks fail before anything is rendered, or, when asked,
+  // have their channels dropped with a warning.
   Sequence sequence = input_sequence;
-  if (options.ignore_missing_expressions) {
-    for (const auto& name : sequence.ExpressionNames()) {
-      SequenceFrame probe;
-      probe.expression[name] = 0.0;
-      try {
-        ExpressionWeightsForRig(probe, rig);
-      } catch (const Error&) {
-        report.warnings.push_back(fmt::format("the rig has no expression '{}' (nor '{}_L'/'{}_R'): its channel is dropped",
-                                              name, name, name));
-        for (auto& k : sequence.keys) k.values.erase("expression:" + name);
-      }
-    }
-  }
-  // Fail before rendering anything when the sequence names expressions the rig lacks.
-  for (const auto& name : sequence.ExpressionNames()) {
+  for (const auto& name : input_sequence.ExpressionNames()) {
     SequenceFrame probe;
     probe.expression[name] = 0.0;
-    ExpressionWeightsForRig(probe, rig);
+    try {
+      ExpressionWeightsForRig(probe, rig);
+    } catch (const Error&) {
+      if (!options.ignore_missing_expressions) throw;
+      report.warnings.push_back(fmt::format("the rig has no expression '{}' (nor '{}_L'/'{}_R'): its channel is dropped",
+                                            name, name, name));
+      for (auto& k : sequence.keys) k.values.erase("expression:" + name);
+    }
   }
   const int first = options.first_frame;
   const int count = options.max_frames < 0 ? sequence.num_frames() - first
@@ -201,7 +196,7 @@ DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const
       ++report.frames;
       progress.Advance();
     }
-    for (const auto& e : studio.timing().Entries()) timing.Add("  " + e.name, e.total_seconds);
+    for (const auto& e : studio.timing().Entries()) timing.Add("  " + e.name, e.total_seconds, e.count);
     report.timing = timing.ToTable();
     json ds;
     ds["format"] = "crease synthetic sequence";

@@ -214,7 +214,6 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
     materials.vertex_part[s.hires_vertices + v] = rig.vertex_part.empty() ? 0 : 1 + rig.vertex_part[v];
   }
   for (int v = s.occluder_first >= 0 ? s.occluder_first : total; v < total; ++v) materials.vertex_part[v] = occluder_part;
-  mesh.V = MatX3d::Zero(total, 3);
   SequenceFrame rest;
   mesh.V = SceneVertices(f0, rest, WorldFromHead(rest));
   s.renderer = std::make_unique<Renderer>(mesh, std::move(materials), RendererOptions{}, "studio scene");

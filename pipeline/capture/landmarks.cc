@@ -10,6 +10,7 @@
 #include <dlib/image_processing/frontal_face_detector.h>
 #include <dlib/opencv/cv_image.h>
 
+#include "core/color.h"
 #include "core/error.h"
 
 namespace crease {
@@ -45,8 +46,7 @@ cv::Mat ToGray8(const cv::Mat& image) {
     const float* src = f.ptr<float>(y);
     uint8_t* dst = out.ptr<uint8_t>(y);
     for (int x = 0; x < f.cols; ++x) {
-      float v = std::clamp(std::isfinite(src[x]) ? src[x] : 0.0f, 0.0f, 1.0f);
-      v = v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.0f / 2.4f) - 0.055f;  // sRGB
+      const float v = LinearToSrgb(std::isfinite(src[x]) ? src[x] : 0.0f);
       dst[x] = static_cast<uint8_t>(std::lround(v * 255.0f));
     }
   }
