@@ -89,6 +89,11 @@ void WriteRig(const std::filesystem::path& path, const FaceRig& rig);
 // Errors name the file: wrong magic ("not a crease rig"), another version, truncated data.
 FaceRig ReadRig(const std::filesystem::path& path);
 
+// The rig's triangles that form the face chart (the UV layout of texture and
+// displacement maps): all corners in the part "face" when the rig has parts, else
+// all triangles with every corner's UV in [0, 1]². Throws Error when there are none.
+MatX3i FaceChartTriangles(const FaceRig& rig);
+
 // Region masks of StandardRegionNames() derived from the 68 iBUG landmarks'
 // positions in UV (the rig must have landmarks "ibug_1" … "ibug_68"): forehead
 // above the brows, glabella between them, each eye with its surroundings (crow's

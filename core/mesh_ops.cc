@@ -1,5 +1,7 @@
 #include "core/mesh_ops.h"
 
+#include <Eigen/IterativeLinearSolvers>
+#include <tbb/parallel_for.h>
 #include <Eigen/SparseCholesky>
 #include <algorithm>
 #include <cmath>
@@ -250,6 +252,8 @@ void LowpassOptions::VisitFields(OptionVisitor& v) {
   v.Field("steps", steps);
   v.Field("mass_matrix", mass_matrix);
   v.Field("boundary", boundary);
+  v.Field("solver", solver);
+  v.Field("iterative_tolerance", iterative_tolerance);
 }
 
 void LowpassOptions::Check() const {
@@ -258,13 +262,32 @@ void LowpassOptions::Check() const {
   CheckGe("LowpassOptions", "steps", steps, 1);
   CheckOneOf("LowpassOptions", "mass_matrix", mass_matrix, {"barycentric", "voronoi"});
   CheckOneOf("LowpassOptions", "boundary", boundary, {"natural", "fixed"});
+  CheckOneOf("LowpassOptions", "solver", solver, {"direct", "iterative"});
+  CheckGt("LowpassOptions", "iterative_tolerance", iterative_tolerance, 0.0);
+  CheckLt("LowpassOptions", "iterative_tolerance", iterative_tolerance, 1e-2);
 }
 
 struct MeshLowpass::Impl {
   Eigen::VectorXd mass;      // diagonal of M
   std::vector<char> fixed;   // vertices that keep their input value
   SpMat coupling;            // τ L(free, fixed)
-  Ldlt solver;               // M + τL with identity rows for fixed vertices
+  Ldlt solver;               // M + τL with identity rows for fixed vertices ("direct")
+  SpMat system;              // the same matrix, for "iterative"
+  double tolerance = 0.0;
+  bool iterative = false;
+  // One backward-Euler step: solves (M + τL) x = rhs, warm-started from `guess`.
+  Eigen::MatrixXd Solve(const Eigen::MatrixXd& rhs, const Eigen::MatrixXd& guess) const {
+    if (!iterative) return solver.solve(rhs);
+    Eigen::ConjugateGradient<SpMat, Eigen::Lower | Eigen::Upper, Eigen::DiagonalPreconditioner<double>> cg;
+    cg.setTolerance(tolerance);
+    cg.setMaxIterations(1000);
+    cg.compute(system);
+    Eigen::MatrixXd x(rhs.rows(), rhs.cols());
+    // Columns are independent: solved in parallel (same bytes for any thread count).
+    tbb::parallel_for(0, static_cast<int>(rhs.cols()),
+                      [&](int c) { x.col(c) = cg.solveWithGuess(rhs.col(c), guess.col(c)); });
+    return x;
+  }
 };
 
 MeshLowpass::MeshLowpass(const TriMesh& input_mesh, const LowpassOptions& options)
@@ -291,7 +314,13 @@ MeshLowpass::MeshLowpass(const TriMesh& input_mesh, const LowpassOptions& option
   }
   const SpMat A = SpMat(M + tau * L);
   impl->coupling = Coupling(A, impl->fixed);
-  Factorize(impl->solver, WithIdentityRows(A, impl->fixed), "MeshLowpass");
+  impl->iterative = options_.solver == "iterative";
+  impl->tolerance = options_.iterative_tolerance;
+  if (impl->iterative) {
+    impl->system = WithIdentityRows(A, impl->fixed);
+  } else {
+    Factorize(impl->solver, WithIdentityRows(A, impl->fixed), "MeshLowpass");
+  }
   impl_ = std::move(impl);
 }
 
@@ -304,7 +333,7 @@ Eigen::VectorXd MeshLowpass::ApplyInner(const Eigen::VectorXd& x) const {
     for (int i = 0; i < num_inner_; ++i) {
       if (impl_->fixed[i]) rhs[i] = x[i];
     }
-    cur = impl_->solver.solve(rhs);
+    cur = impl_->Solve(rhs, cur);
   }
   return cur;
 }
@@ -319,7 +348,7 @@ Eigen::MatrixXd MeshLowpass::ApplyInner(const Eigen::MatrixXd& X) const {
     for (int i = 0; i < num_inner_; ++i) {
       if (impl_->fixed[i]) rhs.row(i) = X0.row(i);
     }
-    cur = impl_->solver.solve(rhs);
+    cur = impl_->Solve(rhs, cur);
   }
   return cur;
 }

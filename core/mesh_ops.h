@@ -102,6 +102,15 @@ struct LowpassOptions {
   // "fixed" (Dirichlet: boundary vertices keep their input values; a planar mesh
   // is then reproduced exactly, but detail at the boundary is not filtered).
   std::string boundary = "natural";
+  // How each step's system (M + τL) x = M x_k is solved: "direct" (one sparse
+  // LDLᵀ factorisation in the constructor; best for wide filters and repeated use)
+  // or "iterative" (conjugate gradients with a Jacobi preconditioner, warm-started
+  // from the previous step; no factorisation, best for narrow filters such as G^HF
+  // on dense scans, where M + τL is close to diagonal and CG needs a few iterations).
+  std::string solver = "direct";
+  // "iterative": relative residual at which CG stops (per step and coordinate; 1e-8
+  // of positions ~100 mm is ~1e-6 mm).
+  double iterative_tolerance = 1e-8;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;

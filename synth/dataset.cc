@@ -247,8 +247,9 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
   WriteFolderAtomic(out, options.overwrite, [&](const fs::path& dir) {
     WriteRig(dir / "rig.crig", rig);
     json index;
-    index["format"] = "crease synthetic scan set";
-    index["version"] = 1;
+    index["format"] = "crease scan set";
+    index["version"] = 2;
+    index["generator"] = "crease synth scans";
     index["rig"] = "rig.crig";
     index["light_rigs"] = options.light_rigs;
     index["cameras"] = options.cameras;
@@ -264,7 +265,7 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
       for (size_t e = 0; e < expressions.size(); ++e) {
         const fs::path sdir = adir / names[e];
         fs::create_directories(sdir);
-        json cams = json::array();
+        json images = json::array();
         bool mesh_written = false;
         for (int c = 0; c < options.cameras; ++c) {
           const double az = options.cameras == 1 ? 0.0
@@ -276,7 +277,6 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
           const Eigen::Vector3d eye = centre_in_head + options.studio.distance_mm * Eigen::Vector3d(std::sin(r), 0, std::cos(r));
           const Camera cam = LookAtCamera(front.intrinsics, eye, centre_in_head, Eigen::Vector3d::UnitY());
           WriteCamera(sdir / fmt::format("cam{}.json", c), cam);
-          cams.push_back(fmt::format("cam{}.json", c));
           for (size_t li = 0; li < options.light_rigs.size(); ++li) {
             const LightRig& lights = light_rigs[li];
             const std::string light_name = fs::path(options.light_rigs[li]).stem().string();
@@ -286,6 +286,9 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
             cv::Mat srgb;
             f.image.srgb8.convertTo(srgb, CV_8U);
             WriteImage(sdir / fmt::format("cam{}_{}.png", c, light_name), srgb, {.srgb = false});
+            images.push_back({{"camera", fmt::format("{}/cam{}.json", names[e], c)},
+                              {"image", fmt::format("{}/cam{}_{}.png", names[e], c, light_name)},
+                              {"light", light_name}});
             if (!mesh_written) {
               WritePly(sdir / "mesh.ply", f.actor.hires, {.binary = true, .double_precision = false});
               WriteImage(sdir / "expression_displacement.exr", f.actor.expression_displacement);
@@ -299,11 +302,20 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
             }
           }
         }
-        scans.push_back({{"name", names[e]}, {"cameras", cams}});
+        scans.push_back({{"name", names[e]},
+                         {"mesh", names[e] + "/mesh.ply"},
+                         {"images", images},
+                         {"truth",
+                          {{"expression_displacement", names[e] + "/expression_displacement.exr"},
+                           {"parameters", names[e] + "/truth.json"}}}});
         ++report.frames;
         progress.Advance();
       }
-      actors.push_back({{"folder", adir.filename().string()}, {"seed", actor_seeds[a]}, {"scans", scans}});
+      actors.push_back({{"folder", adir.filename().string()},
+                        {"seed", actor_seeds[a]},
+                        {"neutral", names[0]},
+                        {"actor", "actor.json"},
+                        {"scans", scans}});
     }
     index["actors"] = actors;
     WriteJsonFile(dir / "scans.json", index);

@@ -148,28 +148,6 @@ int Count(Rng& rng, double expected, int max_count) {
 
 }  // namespace
 
-MatX3i FaceChartTriangles(const FaceRig& rig) {
-  const TriMesh& m = rig.neutral;
-  const int face_part = rig.part_names.empty() ? -1 : rig.PartIndex("face");
-  std::vector<int> keep;
-  for (int f = 0; f < m.num_faces(); ++f) {
-    bool ok = true;
-    for (int k = 0; k < 3; ++k) {
-      const int v = m.F(f, k);
-      if (face_part >= 0) {
-        ok = ok && rig.vertex_part[v] == face_part;
-      } else {
-        ok = ok && m.UV(v, 0) >= 0 && m.UV(v, 0) <= 1 && m.UV(v, 1) >= 0 && m.UV(v, 1) <= 1;
-      }
-    }
-    if (ok) keep.push_back(f);
-  }
-  Require(!keep.empty(), "rig: no triangles in the face chart (UVs inside [0,1]² or part 'face')");
-  MatX3i F(static_cast<int>(keep.size()), 3);
-  for (size_t i = 0; i < keep.size(); ++i) F.row(static_cast<int>(i)) = m.F.row(keep[i]);
-  return F;
-}
-
 double MmPerUv(const FaceRig& rig) {
   const MatX3i F = FaceChartTriangles(rig);
   double area3 = 0, area_uv = 0;

@@ -66,9 +66,6 @@ struct FaceAnchors {
   Eigen::Vector2d Outward(int side) const { return side == 0 ? Eigen::Vector2d(-lateral) : lateral; }
 };
 
-// The rig's triangles that form the face chart: all corners in the part "face"
-// when the rig has parts, else all triangles with every corner's UV in [0, 1]².
-MatX3i FaceChartTriangles(const FaceRig& rig);
 
 // RMS ratio of 3D (neutral, mm) to UV lengths over the face chart: sqrt(Σ area₃D / Σ area_UV).
 double MmPerUv(const FaceRig& rig);

@@ -20,5 +20,7 @@ void AddRigCommands(CLI::App& app);
 void AddSynthCommands(CLI::App& app);
 // Adds actor, render, sequence, scans, mesh and check to the "synth" subcommand.
 void AddSynthDatasetCommands(CLI::App& app);
+// train (Sec. 4) and model info.
+void AddTrainCommands(CLI::App& app);
 
 }  // namespace crease::app

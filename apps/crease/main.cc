@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
   crease::app::AddRigCommands(app);
   crease::app::AddSynthCommands(app);
   crease::app::AddSynthDatasetCommands(app);
+  crease::app::AddTrainCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,0 +1,526 @@
+#include "pipeline/training/trainer.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+#include <fstream>
+#include <sstream>
+
+#include "core/camera.h"
+#include "core/error.h"
+#include "core/image_io.h"
+#include "core/mesh_io.h"
+#include "core/options.h"
+#include "core/ray_caster.h"
+#include "core/uv_raster.h"
+
+namespace crease {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+void TrainingOptions::VisitFields(OptionVisitor& v) {
+  detail.VisitFields(v);
+  fit.VisitFields(v);
+  texture.VisitFields(v);
+  wrinkle.VisitFields(v);
+  patch.VisitFields(v);
+  pca.VisitFields(v);
+  ferns.VisitFields(v);
+  v.Field("training_lights", training_lights);
+  v.Field("max_actors", max_actors);
+  v.Field("validation_band_mm", validation_band_mm);
+}
+
+void TrainingOptions::Check() const {
+  detail.Check();
+  fit.Check();
+  texture.Check();
+  wrinkle.Check();
+  patch.Check();
+  pca.Check();
+  ferns.Check();
+  Require(!training_lights.empty(), "TrainingOptions.training_lights must be \"all\", \"first\" or light names");
+  CheckGe("TrainingOptions", "max_actors", max_actors, 0);
+  CheckGe("TrainingOptions", "validation_band_mm", validation_band_mm, 0.0);
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double Since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+std::vector<std::string> SplitComma(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ',')) {
+    if (!item.empty()) out.push_back(item);
+  }
+  return out;
+}
+
+// The light rigs whose images make textures.
+std::vector<std::string> SelectLights(const ScanSet& set, const std::string& spec) {
+  const std::vector<std::string> present = set.lights();
+  if (spec == "all") return present;
+  if (spec == "first") return {present.front()};
+  std::vector<std::string> out = SplitComma(spec);
+  for (const auto& l : out) {
+    Require(std::find(present.begin(), present.end(), l) != present.end(),
+            fmt::format("training_lights: light '{}' is not in the scan set (it has: {})", l, fmt::join(present, ", ")));
+  }
+  return out;
+}
+
+// A displacement map as a diverging-colour PNG (blue = inwards, red = outwards),
+// ±range mm, grey outside the mask.
+cv::Mat DisplacementPicture(const cv::Mat& d, const cv::Mat& mask, double range) {
+  cv::Mat out(d.size(), CV_8UC3);
+  for (int j = 0; j < d.rows; ++j) {
+    for (int i = 0; i < d.cols; ++i) {
+      if (!mask.empty() && !mask.at<uint8_t>(j, i)) {
+        out.at<cv::Vec3b>(j, i) = cv::Vec3b(60, 60, 60);
+        continue;
+      }
+      const double x = std::clamp(d.at<float>(j, i) / range, -1.0, 1.0);
+      const double r = x > 0 ? 1.0 : 1.0 + x, b = x < 0 ? 1.0 : 1.0 - x, g = 1.0 - std::abs(x);
+      out.at<cv::Vec3b>(j, i) = cv::Vec3b(static_cast<uint8_t>(255 * r), static_cast<uint8_t>(255 * g),
+                                          static_cast<uint8_t>(255 * b));
+    }
+  }
+  return out;
+}
+
+cv::Mat ResizeMask(const cv::Mat& mask, int size) {
+  if (mask.rows == size && mask.cols == size) return mask;
+  cv::Mat out;
+  cv::resize(mask, out, cv::Size(size, size), 0, 0, cv::INTER_NEAREST);
+  return out;
+}
+
+// Millimetres per texel of an R×R map of the mesh's UV chart (mean scale).
+double MmPerTexel(const TriMesh& mesh, int R) {
+  double a3 = 0, auv = 0;
+  for (int f = 0; f < mesh.num_faces(); ++f) {
+    const Eigen::Vector3d p0 = mesh.V.row(mesh.F(f, 0)), p1 = mesh.V.row(mesh.F(f, 1)), p2 = mesh.V.row(mesh.F(f, 2));
+    const Eigen::Vector2d u0 = mesh.UV.row(mesh.F(f, 0)), u1 = mesh.UV.row(mesh.F(f, 1)), u2 = mesh.UV.row(mesh.F(f, 2));
+    a3 += 0.5 * (p1 - p0).cross(p2 - p0).norm();
+    auv += 0.5 * std::abs((u1 - u0).x() * (u2 - u0).y() - (u1 - u0).y() * (u2 - u0).x());
+  }
+  return auv > 0 ? std::sqrt(a3 / auv) / R : 0.0;
+}
+
+// The map minus its Gaussian blur (σ texels), blurred as a normalised convolution
+// inside `mask` so the chart boundary does not leak in.
+cv::Mat WrinkleBand(const cv::Mat& d, const cv::Mat& mask, double sigma_texels) {
+  cv::Mat m, dm, bd, bm;
+  mask.convertTo(m, CV_32F, 1.0 / 255.0);
+  cv::multiply(d, m, dm);
+  cv::GaussianBlur(dm, bd, cv::Size(0, 0), sigma_texels);
+  cv::GaussianBlur(m, bm, cv::Size(0, 0), sigma_texels);
+  cv::Mat out = d.clone();
+  for (int j = 0; j < d.rows; ++j) {
+    for (int i = 0; i < d.cols; ++i) {
+      const float w = bm.at<float>(j, i);
+      out.at<float>(j, i) = w > 1e-6f ? d.at<float>(j, i) - bd.at<float>(j, i) / w : 0.0f;
+    }
+  }
+  return out;
+}
+
+// A ground-truth displacement map (first channel), checked against the map size.
+cv::Mat ReadTruth(const fs::path& path, int R) {
+  cv::Mat truth = ReadImage(path);
+  if (truth.channels() > 1) cv::extractChannel(truth, truth, 0);
+  Require(truth.rows == R && truth.cols == R,
+          fmt::format("{}: ground truth is {}×{}, the maps are {}×{}", path.string(), truth.cols, truth.rows, R, R));
+  return truth;
+}
+
+json ComparisonJson(const MapComparison& c) {
+  return {{"texels", c.texels},
+          {"rmse_mm", c.rmse_mm},
+          {"correlation", c.correlation},
+          {"reference_rms_mm", c.reference_rms_mm},
+          {"extracted_rms_mm", c.extracted_rms_mm}};
+}
+
+}  // namespace
+
+std::string TrainingSummary::ToJson() const {
+  json j;
+  j["seconds"] = seconds;
+  j["training_pairs"] = training_pairs;
+  json actors_json = json::array();
+  for (const auto& a : actors) {
+    actors_json.push_back({{"name", a.name},
+                           {"scans", a.scans},
+                           {"textures", a.textures},
+                           {"patch_locations", a.patch_locations},
+                           {"training_pairs", a.training_pairs},
+                           {"correspondence", a.correspondence},
+                           {"fit_rms_mm", a.fit_rms_mm},
+                           {"wrinkle_texels", a.wrinkle_texels}});
+  }
+  j["actors"] = actors_json;
+  json acc = json::array();
+  for (const auto& s : accuracy) {
+    json regions = json::object();
+    for (const auto& [name, c] : s.regions) regions[name] = ComparisonJson(c);
+    json regions_band = json::object();
+    for (const auto& [name, c] : s.regions_band) regions_band[name] = ComparisonJson(c);
+    acc.push_back({{"actor", s.actor},
+                   {"scan", s.scan},
+                   {"face", ComparisonJson(s.face)},
+                   {"regions", regions},
+                   {"face_wrinkle_band", ComparisonJson(s.face_band)},
+                   {"regions_wrinkle_band", regions_band}});
+  }
+  j["detail_extraction_accuracy"] = acc;
+  j["pca_energy"] = pca_energy;
+  j["pca_reconstruction_rmse_mm"] = pca_reconstruction_rmse_mm;
+  j["ferns"] = {{"samples", ferns.num_samples},
+                {"checkpoint_ferns", ferns.checkpoint_ferns},
+                {"train_rmse", ferns.train_rmse},
+                {"mean_abs_correlation", ferns.mean_abs_correlation},
+                {"empty_bin_fraction", ferns.empty_bin_fraction},
+                {"seconds", ferns.seconds}};
+  j["timing"] = json::parse(timing.ToJson());
+  return j.dump(2);
+}
+
+std::string TrainingSummary::ToMarkdown() const {
+  std::string s = "# Training summary\n\n";
+  int scans = 0;
+  for (const auto& a : actors) scans += a.scans;
+  s += fmt::format("{} actors, {} scans, {} training patch pairs, {:.1f} s.\n\n", actors.size(), scans, training_pairs,
+                   seconds);
+  s += "| actor | scans | textures | rig fit | fit RMS (mm) | patches placed | pairs |\n|---|---|---|---|---|---|---|\n";
+  for (const auto& a : actors) {
+    double worst = 0.0;
+    for (double r : a.fit_rms_mm) worst = std::max(worst, r);
+    s += fmt::format("| {} | {} | {} | {} | ≤ {:.3f} | {} | {} |\n", a.name, a.scans, a.textures, a.correspondence,
+                     worst, a.patch_locations, a.training_pairs);
+  }
+  if (!accuracy.empty()) {
+    s += "\n## Detail extraction against ground truth (Sec. 4.1)\n\n";
+    s += "D^j extracted from the scan meshes against the studio's medium-scale expression displacement (minus the "
+         "neutral's, which M_0^j carries).\n\n";
+    s += "| actor | scan | RMSE face (mm) | corr. face | GT RMS (mm) |";
+    std::vector<std::string> region_names;
+    for (const auto& [name, c] : accuracy.front().regions) region_names.push_back(name);
+    for (const auto& r : region_names) s += fmt::format(" corr. {} |", r);
+    s += "\n|---|---|---|---|---|";
+    for (size_t r = 0; r < region_names.size(); ++r) s += "---|";
+    s += "\n";
+    for (const auto& a : accuracy) {
+      s += fmt::format("| {} | {} | {:.4f} | {:.3f} | {:.4f} |", a.actor, a.scan, a.face.rmse_mm, a.face.correlation,
+                       a.face.reference_rms_mm);
+      for (const auto& [name, c] : a.regions) s += c.texels ? fmt::format(" {:.3f} |", c.correlation) : " – |";
+      s += "\n";
+    }
+  }
+  if (!accuracy.empty() && accuracy.front().face_band.texels > 0) {
+    s += "\nThe same in the wrinkle band (both maps minus their Gaussian blur, TrainingOptions::validation_band_mm), "
+         "forehead, eye and cheek regions:\n\n";
+    s += "| actor | scan | RMSE face (mm) | corr. face | GT RMS face (mm) | corr. forehead | corr. glabella | corr. eyes | corr. cheeks |\n"
+         "|---|---|---|---|---|---|---|---|---|\n";
+    for (const auto& a : accuracy) {
+      auto corr = [&](std::initializer_list<const char*> names) {
+        double sum = 0;
+        int n = 0;
+        for (const auto& [name, c] : a.regions_band) {
+          for (const char* want : names) {
+            if (name == want && c.texels > 0 && c.reference_rms_mm > 1e-4) {
+              sum += c.correlation;
+              ++n;
+            }
+          }
+        }
+        return n ? fmt::format("{:.3f}", sum / n) : std::string("–");
+      };
+      s += fmt::format("| {} | {} | {:.4f} | {:.3f} | {:.4f} | {} | {} | {} | {} |\n", a.actor, a.scan, a.face_band.rmse_mm,
+                       a.face_band.correlation, a.face_band.reference_rms_mm, corr({"forehead"}), corr({"glabella"}),
+                       corr({"left_eye", "right_eye"}), corr({"left_cheek", "right_cheek"}));
+    }
+    s += "\n(– : the ground truth has no wrinkle there.)\n";
+  }
+  s += "\n## PCA of displacement patches (Sec. 4.3, Fig. 7)\n\n";
+  for (int k : {1, 2, 4, 8, 16, 32, 64}) {
+    if (k <= static_cast<int>(pca_energy.size())) s += fmt::format("- {} dimensions: {:.1f} % of the energy\n", k, 100 * pca_energy[k - 1]);
+  }
+  s += fmt::format("- reconstruction RMSE at the chosen dimension: {:.4f} mm\n", pca_reconstruction_rmse_mm);
+  s += "\n## Fern cascade training error (Eqs. 2–4)\n\n| ferns | RMSE of coefficients |\n|---|---|\n";
+  for (size_t i = 0; i < ferns.checkpoint_ferns.size(); ++i) {
+    s += fmt::format("| {} | {:.4f} |\n", ferns.checkpoint_ferns[i], ferns.train_rmse[i]);
+  }
+  s += "\n## Time per step\n\n```\n" + timing.ToTable() + "```\n";
+  return s;
+}
+
+DetailModel TrainDetailModel(const ScanSet& set, const FaceRig& rig, const TrainingOptions& options,
+                             const TrainingOutputs& outputs, TrainingSummary* summary,
+                             const std::function<void(const std::string&)>& log_fn) {
+  options.Check();
+  const auto start = Clock::now();
+  auto log = [&](const std::string& line) {
+    if (log_fn) log_fn(line);
+  };
+  TrainingSummary local;
+  TrainingSummary& sum = summary ? *summary : local;
+  sum.actors.clear();
+  sum.accuracy.clear();
+  const int R = options.detail.map_resolution;
+  const std::vector<std::string> lights = SelectLights(set, options.training_lights);
+  const bool pictures = !outputs.report_dir.empty();
+  if (pictures) fs::create_directories(outputs.report_dir);
+  std::vector<ScanActor> actors = set.actors;
+  if (options.max_actors > 0 && static_cast<int>(actors.size()) > options.max_actors) actors.resize(options.max_actors);
+
+  std::vector<Eigen::MatrixXf> texture_patches, displacement_patches;
+  int total_pairs = 0;
+  for (size_t a = 0; a < actors.size(); ++a) {
+    const ScanActor& actor = actors[a];
+    ActorSummary as;
+    as.name = actor.name;
+    // --- Sec. 4.1: read the scans (neutral first).
+    auto t0 = Clock::now();
+    std::vector<int> order = {actor.neutral};
+    for (int s = 0; s < static_cast<int>(actor.scans.size()); ++s)
+      if (s != actor.neutral) order.push_back(s);
+    std::vector<TriMesh> meshes;
+    std::vector<std::string> names;
+    for (int s : order) {
+      meshes.push_back(ReadMesh(actor.scans[s].mesh));
+      names.push_back(actor.scans[s].mesh.string());
+      Require(meshes.back().F == meshes.front().F,
+              fmt::format("{}: its triangles differ from the neutral scan {} (an actor's scans must share one "
+                          "topology)",
+                          names.back(), names.front()));
+    }
+    as.scans = static_cast<int>(meshes.size());
+    sum.timing.Add("read scans", Since(t0), as.scans);
+    // --- Sec. 4.1: the rig fitted to all of the actor's scans.
+    t0 = Clock::now();
+    const RigFitResult fit = FitRigToScans(rig, meshes, names, options.fit);
+    sum.timing.Add("rig fit (Ceres)", Since(t0));
+    as.correspondence = fit.correspondence;
+    as.fit_rms_mm = fit.rms_mm;
+    log(fmt::format("{}: rig fit ({} correspondences) RMS {} mm, |identity| = {:.2f}", actor.name, fit.correspondence,
+                    fmt::join(fit.rms_mm, " / "), fit.identity.norm()));
+    if (fit.correspondence == "closest") {
+      // The rig's UV layout transferred from the fitted L^0 to M^0 (Sec. 4.1).
+      t0 = Clock::now();
+      std::vector<int> kept;
+      const TriMesh cut = TransferUvsFromRig(rig, fit.fitted[0], meshes[0], options.fit.max_correspondence_mm, &kept);
+      for (auto& m : meshes) {
+        TriMesh c = cut;
+        for (size_t i = 0; i < kept.size(); ++i) c.V.row(static_cast<int>(i)) = m.V.row(kept[i]);
+        m = std::move(c);
+      }
+      sum.timing.Add("UV transfer", Since(t0));
+      log(fmt::format("{}: UVs transferred from the fitted rig to {} of the scan's vertices", actor.name, kept.size()));
+    }
+    // --- Sec. 4.1: D^j for every scan.
+    t0 = Clock::now();
+    std::vector<MatX3d> others;
+    for (size_t j = 1; j < meshes.size(); ++j) others.push_back(meshes[j].V);
+    const DetailExtractor extractor(meshes[0], options.detail, names[0], others);
+    others.clear();
+    sum.timing.Add("G^HF, G, deformation transfer: set-up", Since(t0));
+    const UvRaster raster = RasterizeUv(meshes[0], R, R, names[0]);
+    const double mm_per_texel = MmPerTexel(meshes[0], R);
+    std::vector<cv::Mat> D(meshes.size());
+    const ScanEntry& neutral_scan = actor.scans[actor.neutral];
+    const cv::Mat neutral_truth =
+        neutral_scan.truth_displacement.empty() ? cv::Mat() : ReadTruth(neutral_scan.truth_displacement, R);
+    std::vector<cv::Mat> gray_textures, texture_displacements, texture_coverage;
+    std::vector<std::string> texture_names;
+    for (size_t j = 0; j < meshes.size(); ++j) {
+      const ScanEntry& scan = actor.scans[order[j]];
+      t0 = Clock::now();
+      const ExtractedDetail detail = extractor.Extract(meshes[j].V, names[j]);
+      sum.timing.Add("detail extraction D^j", Since(t0));
+      sum.timing.Add("  G^HF (conjugate gradients)", detail.seconds_hf);
+      sum.timing.Add("  G + deformation transfer", detail.seconds_transfer);
+      sum.timing.Add("  M_0^j and normals", detail.seconds_aligned);
+      sum.timing.Add("  rays (Embree)", detail.seconds_rays);
+      D[j] = detail.displacement;
+      if (!scan.truth_displacement.empty() && !neutral_truth.empty()) {
+        // D^j is relative to M_0^j, which carries the neutral's own detail (static
+        // lines), so its ground truth is the expression displacement minus the
+        // neutral's.
+        cv::Mat truth = ReadTruth(scan.truth_displacement, R) - neutral_truth;
+        cv::Mat mask;
+        cv::bitwise_and(extractor.coverage(), detail.valid, mask);
+        ScanAccuracy acc;
+        acc.actor = actor.name;
+        acc.scan = scan.name;
+        acc.face = CompareMaps(detail.displacement, truth, mask);
+        for (const auto& region : rig.regions) {
+          cv::Mat rm;
+          cv::bitwise_and(mask, ResizeMask(region.mask, R), rm);
+          acc.regions.emplace_back(region.name, CompareMaps(detail.displacement, truth, rm));
+        }
+        if (options.validation_band_mm > 0.0) {
+          const double sigma = options.validation_band_mm / mm_per_texel;
+          const cv::Mat db = WrinkleBand(detail.displacement, mask, sigma), tb = WrinkleBand(truth, mask, sigma);
+          acc.face_band = CompareMaps(db, tb, mask);
+          for (const auto& region : rig.regions) {
+            cv::Mat rm;
+            cv::bitwise_and(mask, ResizeMask(region.mask, R), rm);
+            acc.regions_band.emplace_back(region.name, CompareMaps(db, tb, rm));
+          }
+        }
+        log(fmt::format("{}/{}: D^j vs ground truth: RMSE {:.4f} mm (GT RMS {:.4f}), correlation {:.3f}; wrinkle band: "
+                        "RMSE {:.4f} mm (GT RMS {:.4f}), correlation {:.3f}",
+                        actor.name, scan.name, acc.face.rmse_mm, acc.face.reference_rms_mm, acc.face.correlation,
+                        acc.face_band.rmse_mm, acc.face_band.reference_rms_mm, acc.face_band.correlation));
+        if (pictures) {
+          double range = std::max(0.05, 3.0 * acc.face.reference_rms_mm);
+          cv::Mat both;
+          cv::hconcat(DisplacementPicture(detail.displacement, mask, range), DisplacementPicture(truth, mask, range), both);
+          WriteImage(outputs.report_dir / fmt::format("displacement_{}_{}.png", actor.name, scan.name), both,
+                     {.srgb = false});
+        }
+        sum.accuracy.push_back(std::move(acc));
+      } else if (pictures) {
+        WriteImage(outputs.report_dir / fmt::format("displacement_{}_{}.png", actor.name, scan.name),
+                   DisplacementPicture(detail.displacement, detail.valid, 0.3), {.srgb = false});
+      }
+      // The textures T^j: one per selected light rig, from that rig's images.
+      t0 = Clock::now();
+      const RayCaster caster(meshes[j], {}, names[j]);
+      for (const auto& light : lights) {
+        std::vector<Camera> cams;
+        std::vector<cv::Mat> images;
+        for (const auto& im : scan.images) {
+          if (im.light != light) continue;
+          cams.push_back(ReadCamera(im.camera));
+          images.push_back(ReadImage(im.image));
+          Require(images.back().channels() == 3 || images.back().channels() == 1,
+                  fmt::format("{}: expected an RGB or gray image", im.image.string()));
+        }
+        if (cams.empty()) continue;
+        const ExtractedTexture tex = ExtractTexture(meshes[j], raster, &caster, cams, images, options.texture);
+        gray_textures.push_back(tex.gray);
+        texture_coverage.push_back(tex.seen);
+        texture_displacements.push_back(D[j]);
+        texture_names.push_back(fmt::format("{}/{}/{}", actor.name, scan.name, light));
+        if (pictures && light == lights.front()) {
+          cv::Mat srgb = tex.color.clone();
+          for (int r = 0; r < srgb.rows; ++r) {
+            auto* p = srgb.ptr<float>(r);
+            for (int c = 0; c < srgb.cols * 3; ++c) p[c] = static_cast<float>(LinearToSrgb(std::clamp(p[c], 0.0f, 1.0f)));
+          }
+          cv::Mat out8;
+          srgb.convertTo(out8, CV_8UC3, 255.0);
+          WriteImage(outputs.report_dir / fmt::format("texture_{}_{}.png", actor.name, scan.name), out8, {.srgb = false});
+        }
+      }
+      sum.timing.Add("texture extraction T^j", Since(t0));
+    }
+    as.textures = static_cast<int>(gray_textures.size());
+    Require(!gray_textures.empty(), fmt::format("{}: no images under the selected lights ({})", actor.name,
+                                                fmt::join(lights, ", ")));
+    // --- Sec. 4.2: wrinkle map, patch layout, training pairs.
+    t0 = Clock::now();
+    cv::Mat coverage = extractor.coverage().clone();
+    for (const auto& c : texture_coverage) cv::bitwise_and(coverage, c, coverage);
+    WrinkleMapBuilder builder(R, coverage, rig.regions, options.wrinkle);
+    std::vector<cv::Mat> responses;
+    for (size_t t = 0; t < gray_textures.size(); ++t) responses.push_back(builder.Add(gray_textures[t], texture_names[t]));
+    const WrinkleMap wmap = builder.Finish();
+    PatchLayoutReport layout_report;
+    const PatchLayout layout = PlacePatches(wmap, options.patch, &layout_report);
+    TrainingPatches pairs =
+        ExtractTrainingPatches(layout, gray_textures, responses, texture_displacements, options.wrinkle);
+    sum.timing.Add("wrinkle map + patches", Since(t0));
+    as.patch_locations = layout.num_patches();
+    as.training_pairs = pairs.size();
+    as.wrinkle_texels = cv::countNonZero(wmap.probability > 0);
+    total_pairs += pairs.size();
+    log(fmt::format("{}: wrinkle map over {} texels, {} patches placed, {} training pairs", actor.name,
+                    as.wrinkle_texels, layout.num_patches(), pairs.size()));
+    if (pictures) {
+      WriteImage(outputs.report_dir / fmt::format("wrinkle_map_{}.png", actor.name),
+                 DrawPatchLayout(wmap.probability, layout, wmap.valid), {.srgb = false});
+    }
+    if (pairs.size() > 0) {
+      texture_patches.push_back(std::move(pairs.texture));
+      displacement_patches.push_back(std::move(pairs.displacement));
+    }
+    sum.actors.push_back(as);
+  }
+  Require(total_pairs >= 2, fmt::format("training: only {} training patch pairs (no wrinkles above alpha = {} in the "
+                                        "textures' regions {}?)",
+                                        total_pairs, options.wrinkle.wrinkle_threshold,
+                                        fmt::join(options.wrinkle.patch_regions, ", ")));
+  sum.training_pairs = total_pairs;
+  const int n = options.patch.patch_size * options.patch.patch_size;
+  Eigen::MatrixXf T(total_pairs, n), Dp(total_pairs, n);
+  int row = 0;
+  for (size_t b = 0; b < texture_patches.size(); ++b) {
+    T.middleRows(row, texture_patches[b].rows()) = texture_patches[b];
+    Dp.middleRows(row, displacement_patches[b].rows()) = displacement_patches[b];
+    row += static_cast<int>(texture_patches[b].rows());
+  }
+  texture_patches.clear();
+  displacement_patches.clear();
+  // --- Sec. 4.3: PCA of the displacement patches and the regression targets ĉ_i.
+  auto t0 = Clock::now();
+  PcaOptions pca_options = options.pca;
+  pca_options.dimensions = std::min(pca_options.dimensions, std::min(n, total_pairs));
+  DetailModel model;
+  model.pca = FitPatchPca(Dp, pca_options);
+  const Eigen::MatrixXf targets = model.pca.ProjectPatches(Dp);
+  {
+    const Eigen::MatrixXf recon =
+        (model.pca.basis * targets.transpose()).colwise() + model.pca.mean;  // n × N
+    sum.pca_reconstruction_rmse_mm = std::sqrt((recon - Dp.transpose()).squaredNorm() / (double(n) * total_pairs));
+  }
+  sum.pca_energy = model.pca.energy;
+  sum.timing.Add("PCA", Since(t0));
+  log(fmt::format("PCA: {} dimensions hold {:.1f} % of the energy (85 % needs {})", model.pca.dimensions(),
+                  100 * model.pca.energy[model.pca.dimensions() - 1], model.pca.DimensionsForEnergy(0.85)));
+  if (pictures) {
+    cv::Mat mosaic = EigenPatchMosaic(model.pca, std::min(16, model.pca.dimensions()), options.patch.patch_size);
+    cv::Mat big;
+    cv::resize(mosaic, big, cv::Size(), 4, 4, cv::INTER_NEAREST);
+    WriteImage(outputs.report_dir / "eigen_patches.png", big);
+    std::string csv = "dimensions,energy\n";
+    for (size_t k = 0; k < model.pca.energy.size(); ++k) csv += fmt::format("{},{:.6f}\n", k + 1, model.pca.energy[k]);
+    std::ofstream(outputs.report_dir / "pca_energy.csv") << csv;
+  }
+  // --- Sec. 4.3: the fern cascade from texture patches to ĉ_i (Eqs. 2–4).
+  t0 = Clock::now();
+  FernTrainingResult trained = TrainFernCascade(T, targets, options.ferns);
+  sum.timing.Add("fern cascade", Since(t0));
+  sum.ferns = trained.report;
+  log(fmt::format("fern cascade: K = {}, training RMSE of coefficients {:.4f} → {:.4f}", options.ferns.num_ferns,
+                  trained.report.train_rmse.front(), trained.report.train_rmse.back()));
+  model.cascade = std::move(trained.cascade);
+  model.map_resolution = R;
+  model.wrinkle = options.wrinkle;
+  model.patch = options.patch;
+  model.detail = options.detail;
+  sum.seconds = Since(start);
+  json tj;
+  tj["scan_set"] = set.root.string();
+  tj["actors"] = static_cast<int>(sum.actors.size());
+  int scans = 0;
+  for (const auto& a : sum.actors) scans += a.scans;
+  tj["scans"] = scans;
+  tj["training_pairs"] = total_pairs;
+  tj["options"] = json::parse(OptionsToJson(options));
+  tj["seconds"] = sum.seconds;
+  model.training_json = tj.dump();
+  return model;
+}
+
+}  // namespace crease

@@ -1,0 +1,116 @@
+// The training stage (paper Sec. 4) end to end: a scan set and a rig in, the
+// detail model out, with a report of every step.
+//
+//   per actor (Sec. 4.1): read the scans; fit the rig (identity shared, expression
+//     and pose per scan; rig_fit.h); give the scans the rig's UV layout if they
+//     lack it; extract D^j (detail_extraction.h) and the textures T^j from the
+//     images (texture_extraction.h), one texture per scan and light rig; compare
+//     D^j with the ground truth when the set has it;
+//   per actor (Sec. 4.2): the wrinkle map from its textures, the greedy oriented
+//     patch layout, the (t, d) training pairs;
+//   all actors (Sec. 4.3): PCA of the displacement patches, the targets ĉ_i, and
+//     the boosted fern cascade from texture patches to ĉ_i.
+//
+// Relighting augmentation: when the scans are imaged under several light rigs,
+// each (scan, light) gives its own texture and training pairs with the same D^j
+// (TrainingOptions::training_lights) — the fix the paper proposes for its
+// illumination limitation (Sec. 7, Fig. 14).
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "core/face_rig.h"
+#include "core/timer.h"
+#include "pipeline/training/detail_extraction.h"
+#include "pipeline/training/detail_model.h"
+#include "pipeline/training/fern_cascade.h"
+#include "pipeline/training/patches.h"
+#include "pipeline/training/pca.h"
+#include "pipeline/training/rig_fit.h"
+#include "pipeline/training/scan_set.h"
+#include "pipeline/training/texture_extraction.h"
+#include "pipeline/training/wrinkle_map.h"
+
+namespace crease {
+
+struct TrainingOptions {
+  DetailExtractionOptions detail;  // Sec. 4.1
+  RigFitOptions fit;               // Sec. 4.1
+  TextureOptions texture;          // Sec. 4.1
+  WrinkleMapOptions wrinkle;       // Sec. 4.2
+  PatchLayoutOptions patch;        // Sec. 4.2
+  PcaOptions pca;                  // Sec. 4.3
+  FernOptions ferns;               // Sec. 4.3
+  // Which light rigs' images make training textures: "all" (each light its own
+  // texture: relighting augmentation), "first", or a comma-separated list of names.
+  std::string training_lights = "all";
+  // Use only the first N actors of the set (0 = all), for training-size studies.
+  int max_actors = 0;
+  // Validation against ground truth also in the wrinkle band: both maps minus
+  // their Gaussian blur of this σ (mm on the face), which removes the broad
+  // medium-frequency expression shape that D^j legitimately holds (the part of
+  // the coarse expression the compatible rig gives up, Sec. 4.1) but the studio's
+  // wrinkle-layer ground truth does not. 0 = raw comparison only.
+  double validation_band_mm = 2.0;
+
+  // All fields of all stages, flattened (keys are unique).
+  void VisitFields(OptionVisitor& v);
+  void Check() const;
+};
+
+// Detail-extraction accuracy of one scan against the ground truth.
+struct ScanAccuracy {
+  std::string actor, scan;
+  MapComparison face;                                        // over the covered face
+  std::vector<std::pair<std::string, MapComparison>> regions;  // per rig region
+  // The same in the wrinkle band (TrainingOptions::validation_band_mm).
+  MapComparison face_band;
+  std::vector<std::pair<std::string, MapComparison>> regions_band;
+};
+
+struct ActorSummary {
+  std::string name;
+  int scans = 0;
+  int textures = 0;
+  int patch_locations = 0;  // placed patches
+  int training_pairs = 0;   // (t, d) pairs
+  std::string correspondence;
+  std::vector<double> fit_rms_mm;  // per scan
+  double wrinkle_texels = 0;       // texels with W > 0
+};
+
+struct TrainingSummary {
+  std::vector<ActorSummary> actors;
+  std::vector<ScanAccuracy> accuracy;  // empty without ground truth
+  int training_pairs = 0;
+  std::vector<double> pca_energy;      // energy[k] for k + 1 dimensions
+  FernTrainingReport ferns;
+  double pca_reconstruction_rmse_mm = 0.0;  // of the displacement patches at D dimensions
+  TimingReport timing;
+  double seconds = 0.0;
+
+  // Markdown: the figures a researcher checks first.
+  std::string ToMarkdown() const;
+  // JSON text of everything above.
+  std::string ToJson() const;
+};
+
+// Report artefacts (pictures) the trainer can write while it runs; an empty
+// folder writes none.
+struct TrainingOutputs {
+  std::filesystem::path report_dir;
+};
+
+// Trains the detail model. `rig` is the global tracker's rig (the scans are fitted
+// with it; the model records the lowpass that makes it compatible). `log` receives
+// one line per step (may be empty). Throws Error naming the file or option at fault.
+DetailModel TrainDetailModel(const ScanSet& scans, const FaceRig& rig, const TrainingOptions& options,
+                             const TrainingOutputs& outputs, TrainingSummary* summary,
+                             const std::function<void(const std::string&)>& log = {});
+
+}  // namespace crease

@@ -1,0 +1,166 @@
+// The actor's wrinkle map (paper Sec. 4.2): where in UV expression wrinkles
+// form, and how they are oriented. Built from J gray textures — the training
+// expressions' textures T^j (Sec. 4.2) or, at capture time, the first N video
+// frames' textures (Sec. 5.2) — so nothing here knows about scans.
+//
+// Per texture T^j (a gray, linear [0, 1] texture in the rig's UV layout):
+//   r_j = G_large * T^j − G_small * T^j                      (DoG, DogResponse)
+// positive on dark lines: wrinkles appear as shadow lines in the texture.
+// Over the J textures, per texel p of the valid region (the union of the named
+// rig regions — forehead, glabella, around the eyes, cheeks — intersected with
+// the texture coverage):
+//   W(p) = (1/J) Σ_j [r_j(p) > α] · r_j(p)                   (WrinkleProbability)
+// and outside the valid region W = 0. The orientation at p is the average of the
+// doubled-angle gradient vectors of the contributing texels,
+//   O(p) = G_o * Σ_j [r_j > α] v_j  /  G_o * Σ_j [r_j > α],
+//   v_j  = (g_x² − g_y², 2 g_x g_y),  g = ∇(G_d * T^j),
+// and the patch angle θ(p) = ½ atan2(O_y, O_x) ∈ [0, π) is the direction across
+// the wrinkle (the gradient direction, in texel coordinates: x = i to the right,
+// y = j downwards, so θ grows clockwise on screen).
+//
+// Texels follow DESIGN.md: texel (i, j) of an S×S map covers u = (i + 0.5)/S,
+// v = (j + 0.5)/S, v downwards. Maps are CV_32F, masks CV_8U (non-zero = set).
+//
+// Differences from the paper:
+//   1. "A small kernel of size 6 and a large kernel of size 8" is read as Gaussian
+//      standard deviations in texels of a 1024² map. A wrinkle 1–3 mm wide spans
+//      ~5–15 texels there, so σ = 6 / 8 make the DoG a band-pass at wrinkle scale;
+//      reading 6 and 8 as window widths (σ ≈ 1–1.5) would respond to pores. For
+//      other map sizes the σ scale with size / dog_reference_resolution.
+//   2. The DoG is a normalised convolution, blur(T·m)/blur(m) with m the texture's
+//      coverage mask, so the face boundary and holes (eyes, mouth) and the image
+//      border do not produce false wrinkles. The paper does not say.
+//   3. W divides by J (all textures), i.e. W = mean_j of the thresholded response,
+//      so W mixes how often and how strongly a wrinkle appears. The paper's "average
+//      filter response across textures for each filtered pixel value above α"
+//      could also divide by the number of contributing textures.
+//   4. The paper's 2-channel gradient image averages raw texture gradients. Those
+//      cancel across a dark line (opposite signs on its two sides) and vanish at its
+//      centre, where patches are centred. We average the sign-free doubled-angle
+//      vectors (the structure tensor's orientation part) of the contributing texels
+//      instead, lightly smoothed (σ_o) so that the line's flanks inform its centre;
+//      gradients are taken on the texture smoothed by σ_d (pixel noise, pores).
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "core/face_rig.h"
+
+namespace crease {
+
+class OptionVisitor;
+namespace internal {
+class DogFilter;  // wrinkle_map.cc: the DoG's normalised-convolution denominators
+}  // namespace internal
+
+struct WrinkleMapOptions {
+  // σ of the DoG's small Gaussian, texels at dog_reference_resolution (Sec. 4.2:
+  // "small kernel of size 6"; see Difference 1).
+  double dog_small_sigma = 6.0;
+  // σ of the DoG's large Gaussian, texels at dog_reference_resolution (Sec. 4.2:
+  // "large kernel of size 8").
+  double dog_large_sigma = 8.0;
+  // Map resolution at which the σ of this struct are given, texels (Sec. 4.2 uses
+  // 1024² maps). A map of size S uses σ · S / dog_reference_resolution; 0 = the σ
+  // are texels of whatever map is filtered.
+  int dog_reference_resolution = 1024;
+  // α: a texel contributes to the wrinkle map where its DoG response exceeds this,
+  // intensity units of linear [0, 1] textures (Sec. 4.2: 0.005).
+  double wrinkle_threshold = 0.005;
+  // The rig regions (RegionMask names) wrinkles are searched in (Sec. 4.2: the
+  // forehead, around the eyes, along the crease of the cheek). Empty = the whole
+  // covered texture.
+  std::vector<std::string> patch_regions = {"forehead",  "glabella",   "left_eye",
+                                            "right_eye", "left_cheek", "right_cheek"};
+  // σ_d: Gaussian pre-smoothing of the texture before its gradient is taken for
+  // the orientation, texels at dog_reference_resolution (not in the paper;
+  // Difference 4). 0 = raw central differences.
+  double orientation_gradient_sigma = 1.5;
+  // σ_o: Gaussian smoothing of the averaged doubled-angle gradient vectors, texels
+  // at dog_reference_resolution (not in the paper; Difference 4). 0 = none.
+  double orientation_smoothing_sigma = 3.0;
+
+  void VisitFields(OptionVisitor& v);
+  void Check() const;
+};
+
+// Scale of the σ of `options` for a map of `map_size` texels (Difference 1).
+double SigmaScale(const WrinkleMapOptions& options, int map_size);
+
+// DoG response r = G_large * T − G_small * T of a gray texture (CV_32FC1),
+// positive on dark lines (Sec. 4.2). `coverage` (CV_8U, same size, non-zero =
+// covered; empty = all covered) turns both blurs into normalised convolutions
+// blur(T·m)/blur(m): texels outside coverage never leak in (they may hold
+// anything, NaN included) and the result is 0 there. Non-finite texels inside
+// coverage, a wrong type or a size mismatch throw Error starting with `what`.
+cv::Mat DogResponse(const cv::Mat& gray_texture, const WrinkleMapOptions& options,
+                    const cv::Mat& coverage = cv::Mat(), const std::string& what = "texture");
+
+// The valid region of Sec. 4.2 as a CV_8U map_size² mask (255 = valid): the union
+// of the regions named in `names`, each resampled to map_size by nearest texel
+// centre (masks may have any square resolution), intersected with `coverage`
+// (CV_8U map_size², empty = all covered). Empty `names` = the coverage alone.
+// An unknown name throws Error naming it and the available regions.
+cv::Mat ValidRegionMask(const std::vector<RegionMask>& regions, const std::vector<std::string>& names,
+                        int map_size, const cv::Mat& coverage = cv::Mat());
+
+// W(p) = (1/J) Σ_j [r_j(p) > α] · r_j(p) on texels where `valid` is set, 0
+// elsewhere (Sec. 4.2; Difference 3). `responses`: J ≥ 1 CV_32FC1 maps of one
+// size; `valid`: CV_8U of that size or empty (= all valid).
+cv::Mat WrinkleProbability(const std::vector<cv::Mat>& responses, const cv::Mat& valid, double alpha);
+
+struct WrinkleMap {
+  cv::Mat probability;  // W: CV_32F S×S, ≥ 0; 0 outside `valid`
+  cv::Mat orientation;  // CV_32FC2 S×S: averaged doubled-angle gradient (g_x²−g_y², 2 g_x g_y) of
+                        // the contributing texels (the paper's 2-channel gradient image, Difference 4)
+  cv::Mat angle;        // CV_32F S×S: θ ∈ [0, π), radians, the direction across the wrinkle (x right, y down)
+  cv::Mat valid;        // CV_8U S×S: named regions ∩ coverage
+  cv::Mat coverage;     // CV_8U S×S: texels the textures define (all 255 when none was given)
+  cv::Mat contributions;  // CV_32S S×S: number of textures with r_j > α (anywhere in coverage)
+  int num_textures = 0;   // J
+
+  int size() const { return probability.cols; }
+};
+
+// Accumulates textures one at a time (capture: the first N frames, Sec. 5.2;
+// training: the actor's expressions, Sec. 4.2) without keeping them.
+class WrinkleMapBuilder {
+ public:
+  // `map_size`: S of the textures to come. `coverage`: CV_8U S×S (non-zero where
+  // the textures are defined) or empty (all). `regions`: the rig's region masks;
+  // options.patch_regions picks from them. Throws Error on invalid options, a
+  // coverage of another size or unknown region names.
+  WrinkleMapBuilder(int map_size, const cv::Mat& coverage, const std::vector<RegionMask>& regions,
+                    const WrinkleMapOptions& options);
+
+  // Adds T^j (CV_32FC1 S×S, linear [0, 1]) and returns its DoG response r_j
+  // (for ExtractTrainingPatches). `what` names the texture in errors.
+  cv::Mat Add(const cv::Mat& gray_texture, const std::string& what = "texture");
+
+  int num_textures() const { return num_textures_; }
+  // The map of the textures added so far; throws Error when none was added.
+  WrinkleMap Finish() const;
+
+ private:
+  WrinkleMapOptions options_;
+  int size_ = 0;
+  cv::Mat coverage_;        // CV_8U, 255 / 0
+  cv::Mat valid_;           // CV_8U
+  cv::Mat response_sum_;    // CV_32F: Σ_j [r_j > α] r_j
+  cv::Mat count_;           // CV_32S: Σ_j [r_j > α]
+  cv::Mat orientation_sum_;  // CV_32FC2: Σ_j [r_j > α] v_j
+  int num_textures_ = 0;
+  std::shared_ptr<const internal::DogFilter> filter_;  // built once from the coverage
+};
+
+// All at once: the wrinkle map of `textures` (≥ 1, CV_32FC1, one square size).
+// When `responses` is given it receives r_j of every texture (same order).
+WrinkleMap ComputeWrinkleMap(const std::vector<cv::Mat>& textures, const cv::Mat& coverage,
+                             const std::vector<RegionMask>& regions, const WrinkleMapOptions& options,
+                             std::vector<cv::Mat>* responses = nullptr);
+
+}  // namespace crease
