@@ -59,6 +59,20 @@ bad "unknown actor option" "unknown option 'nope'" "$crease" synth actor --rig "
 bad "bad studio option" "StudioOptions.distance_mm" "$crease" synth sequence --rig "$tmp/head.crig" --actor "$tmp/actor.json" --preset talking --frames 1 --set distance_mm=5 -o "$tmp/seq3"
 bad "frame not in dataset" "not in this dataset" "$crease" synth mesh --dataset "$tmp/seq" --frame 7 -o "$tmp/x.ply"
 
+# Training (Sec. 4) on a tiny scan set: one old actor at 256² maps, one camera.
+ok "synth scans" "$crease" synth scans --rig "$tmp/head.crig" --actors 1 --seed 11 --cameras 2 --size 200x150 --samples 1 -e browInnerUp=1,browOuterUp=1 --set resolution=256 --set surface_min_vertices=1000 --set age_min=1 -o "$tmp/scans"
+ok "train" "$crease" train --scans "$tmp/scans" --out "$tmp/model.cdm" --set map_resolution=256 --set operator_resolution=96 --set patch_size=8 --set pca_dimensions=6 --set num_ferns=20 --set num_sampled_pixels=20 --set max_fit_vertices=300
+grep -q "wrinkle band" "$tmp/model_report/report.md" || { echo "FAIL: training report lacks the detail-extraction accuracy"; fails=$((fails+1)); }
+[ -s "$tmp/model_report/eigen_patches.png" ] || { echo "FAIL: training wrote no eigen-patch picture"; fails=$((fails+1)); }
+ok "model info" "$crease" model info "$tmp/model.cdm"
+grep -q "K = 20" "$tmp/out" || { echo "FAIL: model info does not show K"; fails=$((fails+1)); }
+bad "model info on a rig" "not a crease detail model" "$crease" model info "$tmp/head.crig"
+bad "train without scans" "no scans.json" "$crease" train --scans "$tmp" --rig "$tmp/head.crig" --out "$tmp/m2.cdm"
+bad "unknown training option" "unknown option 'ferns'" "$crease" train --scans "$tmp/scans" --out "$tmp/m2.cdm" --set ferns=3
+bad "bad training option" "num_ferns" "$crease" train --scans "$tmp/scans" --out "$tmp/m2.cdm" --set num_ferns=0
+bad "unknown training light" "light 'disco'" "$crease" train --scans "$tmp/scans" --out "$tmp/m2.cdm" --set training_lights=disco
+[ ! -e "$tmp/m2.cdm" ] || { echo "FAIL: model written despite an error"; fails=$((fails+1)); }
+
 bad "missing mesh" "nope.ply: file does not exist" "$crease" mesh info "$tmp/nope.ply"
 printf 'ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n' > "$tmp/badidx.ply"
 bad "index out of range" "badidx.ply" "$crease" mesh info "$tmp/badidx.ply"

@@ -210,8 +210,13 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_option("--samples", samples, "Anti-aliasing samples per pixel axis")->capture_default_str();
     cmd->add_flag("--overwrite", overwrite, "Replace an existing output folder");
     cmd->add_option("--out,-o", out, "Output folder")->required();
+    static std::vector<std::string> sets;
+    cmd->add_option("--set", sets, "Actor option KEY=VALUE (repeatable; synth/actor.h ActorOptions), e.g. "
+                                   "resolution=512");
     cmd->callback([] {
       const FaceRig rig = ReadRig(rig_path);
+      ActorOptions ao;
+      if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &ao);
       ScanSetOptions o;
       ParseSize(size, &o.studio);
       o.studio.samples_per_axis = samples;
@@ -222,7 +227,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
       Require(actors >= 1, "--actors must be >= 1");
       std::vector<uint64_t> seeds;
       for (int a = 0; a < actors; ++a) seeds.push_back(seed + static_cast<uint64_t>(a));
-      const DatasetReport r = WriteScanSet(rig, seeds, ActorOptions{}, o, out);
+      const DatasetReport r = WriteScanSet(rig, seeds, ao, o, out);
       std::printf("wrote %s: %d scans of %d actors in %.1f s\n", out.c_str(), r.frames, actors, r.seconds);
     });
   }

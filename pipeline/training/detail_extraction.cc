@@ -372,7 +372,10 @@ ExtractedDetail DetailExtractor::Extract(const MatX3d& expression, const std::st
   uint8_t* ok = out.valid.ptr<uint8_t>();
   for (size_t r = 0; r < hits.size(); ++r) {
     const float dist = hits[r].t + kEps;
-    if (!hits[r].valid() || std::abs(dist) > m.options.max_displacement_mm) {
+    // A hit on a surface facing the other way (the opposite lip or eyelid across
+    // a slit, the inside of a fold) is not this texel's skin.
+    if (!hits[r].valid() || std::abs(dist) > m.options.max_displacement_mm ||
+        hits[r].geometric_normal.dot(directions[r]) < 0.3f) {
       ++out.rays_missed;
       continue;
     }

@@ -43,7 +43,7 @@ struct RigFitOptions {
   // Scale of the Huber loss on a vertex residual, mm.
   double robust_scale_mm = 2.0;
   // Face-chart vertices used per scan (a seeded subset; all when larger).
-  int max_fit_vertices = 2000;
+  int max_fit_vertices = 1000;
   // Closest-point path: outer iterations and the largest pair distance, mm.
   int closest_point_iterations = 6;
   double max_correspondence_mm = 10.0;

@@ -311,7 +311,7 @@ DetailModel TrainDetailModel(const ScanSet& set, const FaceRig& rig, const Train
     sum.timing.Add("rig fit (Ceres)", Since(t0));
     as.correspondence = fit.correspondence;
     as.fit_rms_mm = fit.rms_mm;
-    log(fmt::format("{}: rig fit ({} correspondences) RMS {} mm, |identity| = {:.2f}", actor.name, fit.correspondence,
+    log(fmt::format("{}: rig fit ({} correspondences) RMS {:.3f} mm, |identity| = {:.2f}", actor.name, fit.correspondence,
                     fmt::join(fit.rms_mm, " / "), fit.identity.norm()));
     if (fit.correspondence == "closest") {
       // The rig's UV layout transferred from the fitted L^0 to M^0 (Sec. 4.1).
