@@ -26,6 +26,7 @@ void RigFitOptions::VisitFields(OptionVisitor& v) {
   v.Field("robust_scale_mm", robust_scale_mm);
   v.Field("max_fit_vertices", max_fit_vertices);
   v.Field("closest_point_iterations", closest_point_iterations);
+  v.Field("closest_point_metric", closest_point_metric);
   v.Field("max_correspondence_mm", max_correspondence_mm);
   v.Field("max_solver_iterations", max_solver_iterations);
   v.Field("fit_seed", fit_seed);
@@ -39,6 +40,7 @@ void RigFitOptions::Check() const {
   CheckGt(o, "robust_scale_mm", robust_scale_mm, 0.0);
   CheckGe(o, "max_fit_vertices", max_fit_vertices, 10);
   CheckGe(o, "closest_point_iterations", closest_point_iterations, 1);
+  CheckOneOf(o, "closest_point_metric", closest_point_metric, {"point", "plane"});
   CheckGt(o, "max_correspondence_mm", max_correspondence_mm, 0.0);
   CheckGe(o, "max_solver_iterations", max_solver_iterations, 1);
 }
@@ -355,7 +357,8 @@ RigFitResult FitRigToScans(const FaceRig& rig, const std::vector<TriMesh>& scans
       blocks.push_back(pose[j].data());
       blocks.push_back(pose[j].data() + 3);
       for (const auto& [v, p, n] : pairs) {
-        problem.AddResidualBlock(new VertexResidual(rig, v, p, n, !uv_mode, scale),
+        const bool plane = !uv_mode && options.closest_point_metric == "plane";
+        problem.AddResidualBlock(new VertexResidual(rig, v, p, n, plane, scale),
                                  new ceres::HuberLoss(options.robust_scale_mm * scale), blocks);
       }
       if (options.expression_prior > 0.0) {
@@ -402,7 +405,8 @@ RigFitResult FitRigToScans(const FaceRig& rig, const std::vector<TriMesh>& scans
         const Eigen::Vector3d x = result.fitted[j].row(v);
         const int q = nearest[j]->Find(x);
         if (q < 0) continue;
-        const double d = scan_normals[j].row(q).dot(x - scans[j].V.row(q).transpose());
+        const Eigen::Vector3d r = x - scans[j].V.row(q).transpose();
+        const double d = options.closest_point_metric == "plane" ? scan_normals[j].row(q).dot(r) : r.norm();
         se += d * d;
         ++n;
       }

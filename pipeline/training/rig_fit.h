@@ -10,10 +10,15 @@
 //   * "uv" correspondences (the scans carry the rig's UV chart, e.g. synthetic
 //     scans or scans registered to the rig's template): the vertex against the scan
 //     point with the same UV, r = R(ω)x_v + t − p(uv_v) (3 residuals);
-//   * "closest" (scans without the chart): iterated closest points, point-to-plane
-//     r = n_q · (R(ω)x_v + t − q), q the nearest scan vertex, n_q its normal, pairs
-//     farther than max_correspondence_mm or with normals more than 60° apart
-//     dropped. The scans must start roughly aligned with the rig's head frame
+//   * "closest" (scans without the chart): iterated closest points, q the nearest
+//     scan vertex, pairs farther than max_correspondence_mm or with normals more
+//     than 60° apart dropped; point-to-plane r = n_q · (R(ω)x_v + t − q) by default,
+//     or point-to-point r = R(ω)x_v + t − q (closest_point_metric). Point-to-plane
+//     converges from further away and is unbiased on coarse scans, but lets the rig
+//     slide along flat regions (the forehead) by a millimetre or two, which shifts
+//     the UVs transferred to the scan by as much: training is unaffected (textures
+//     and D^j share the transferred layout), but a comparison with ground truth in
+//     the rig's own layout is then limited by that shift. The scans must start roughly aligned with the rig's head frame
 //     (within ~1 cm and ~10°): there is no global registration.
 // x_v = n_v + Σ_k α_k I_vk + Σ_b β_b B_vb, the rig's vertex (identity modes are in
 // units of their standard deviation, so λ_α is a Gaussian prior).
@@ -46,6 +51,7 @@ struct RigFitOptions {
   int max_fit_vertices = 1000;
   // Closest-point path: outer iterations and the largest pair distance, mm.
   int closest_point_iterations = 6;
+  std::string closest_point_metric = "plane";  // "plane" or "point"
   double max_correspondence_mm = 10.0;
   int max_solver_iterations = 50;
   uint64_t fit_seed = 7;

@@ -15,6 +15,7 @@
 #include "core/image_io.h"
 #include "core/mesh_io.h"
 #include "core/options.h"
+#include "core/progress.h"
 #include "core/ray_caster.h"
 #include "core/uv_raster.h"
 
@@ -284,6 +285,9 @@ DetailModel TrainDetailModel(const ScanSet& set, const FaceRig& rig, const Train
 
   std::vector<Eigen::MatrixXf> texture_patches, displacement_patches;
   int total_pairs = 0;
+  int64_t steps = 2;  // every scan, then PCA and the cascade
+  for (const auto& a : actors) steps += static_cast<int64_t>(a.scans.size());
+  Progress progress("training", steps);
   for (size_t a = 0; a < actors.size(); ++a) {
     const ScanActor& actor = actors[a];
     ActorSummary as;
@@ -424,6 +428,7 @@ DetailModel TrainDetailModel(const ScanSet& set, const FaceRig& rig, const Train
         }
       }
       sum.timing.Add("texture extraction T^j", Since(t0));
+      progress.Advance();
     }
     as.textures = static_cast<int>(gray_textures.size());
     Require(!gray_textures.empty(), fmt::format("{}: no images under the selected lights ({})", actor.name,
@@ -486,6 +491,7 @@ DetailModel TrainDetailModel(const ScanSet& set, const FaceRig& rig, const Train
   }
   sum.pca_energy = model.pca.energy;
   sum.timing.Add("PCA", Since(t0));
+  progress.Advance();
   log(fmt::format("PCA: {} dimensions hold {:.1f} % of the energy (85 % needs {})", model.pca.dimensions(),
                   100 * model.pca.energy[model.pca.dimensions() - 1], model.pca.DimensionsForEnergy(0.85)));
   if (pictures) {
@@ -501,6 +507,8 @@ DetailModel TrainDetailModel(const ScanSet& set, const FaceRig& rig, const Train
   t0 = Clock::now();
   FernTrainingResult trained = TrainFernCascade(T, targets, options.ferns);
   sum.timing.Add("fern cascade", Since(t0));
+  progress.Advance();
+  progress.Finish();
   sum.ferns = trained.report;
   log(fmt::format("fern cascade: K = {}, training RMSE of coefficients {:.4f} → {:.4f}", options.ferns.num_ferns,
                   trained.report.train_rmse.front(), trained.report.train_rmse.back()));
