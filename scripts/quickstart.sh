@@ -9,7 +9,8 @@
 #      wrinkles show under the first and fade under the second);
 #   4. renders the first seconds of the `wrinkle-workout` performance with per-frame
 #      ground truth (landmarks, rig parameters, displacement maps);
-#   5. rebuilds the high-resolution ground-truth surface of one frame;
+#   5. rebuilds the high-resolution ground-truth surface of one frame, and tracks the
+#      performance (dlib landmarks, the rig fitted per frame) against its ground truth;
 #   6. writes the training scans of 4 actors (neutral + 4 expressions each, ~0.7 M
 #      vertex meshes, 3 calibrated cameras) and trains the detail model on them
 #      (paper Sec. 4), printing the report: detail-extraction accuracy against the
@@ -51,6 +52,8 @@ step "rendering 2 s of the wrinkle-workout performance with ground truth"
 "$crease" synth sequence --rig "$out/head.crig" --actor "$out/actor1.json" --preset wrinkle-workout \
   --frames 60 --overwrite -o "$out/wrinkle_workout"
 "$crease" synth mesh --dataset "$out/wrinkle_workout" --frame 33 -o "$out/frame33_hires.ply"
+step "tracking the performance: dlib landmarks and the rig fitted per frame, measured against the ground truth"
+"$crease" track -i "$out/wrinkle_workout" -o "$out/tracking" --preview "$out/tracking.avi"
 
 step "training scans: 4 actors, a neutral and 4 wrinkle expressions each, 3 cameras (about 2 min)"
 "$crease" synth scans --rig "$out/head.crig" --overwrite -o "$out/scans"
@@ -61,6 +64,7 @@ step "done. Outputs:"
 for f in sample.crig rig_regions.png expression.vtp expression.png expression_displacement.png \
          head.crig head_rig.png actor1.json brow_raise_raking.png brow_raise_front.png \
          wrinkle_workout/dataset.json wrinkle_workout/frames/000033.png frame33_hires.ply \
+         tracking/summary.json tracking/tracking.pvd tracking.avi \
          scans/scans.json model.cdm model_report/report.md model_report/eigen_patches.png \
          model_report/wrinkle_map_actor_002.png model_report/displacement_actor_002_01_browInnerUp.png; do
   printf '  %s\n' "$out/$f"

@@ -59,6 +59,23 @@ bad "unknown actor option" "unknown option 'nope'" "$crease" synth actor --rig "
 bad "bad studio option" "StudioOptions.distance_mm" "$crease" synth sequence --rig "$tmp/head.crig" --actor "$tmp/actor.json" --preset talking --frames 1 --set distance_mm=5 -o "$tmp/seq3"
 bad "frame not in dataset" "not in this dataset" "$crease" synth mesh --dataset "$tmp/seq" --frame 7 -o "$tmp/x.ply"
 
+# The global tracker (issue 5): the ground-truth-prior control on the small sequence,
+# dlib on frames without a face (a loss, not a crash), and bad input.
+ok "track ground-truth-prior" "$crease" track -i "$tmp/seq" --ground-truth-prior --noise 0.5 -o "$tmp/track_gt" --preview "$tmp/track_gt.avi"
+[ -s "$tmp/track_gt/frames/000031.json" ] && [ -s "$tmp/track_gt/meshes/000031.ply" ] && [ -s "$tmp/track_gt/tracking.pvd" ] && [ -s "$tmp/track_gt.avi" ] \
+  || { echo "FAIL: track wrote no per-frame outputs"; fails=$((fails+1)); }
+grep -q '"vertex_px"' "$tmp/track_gt/summary.json" || { echo "FAIL: track summary lacks the error against ground truth"; fails=$((fails+1)); }
+mkdir -p "$tmp/noface"; cp "$tmp/regions.png" "$tmp/noface/a.png"; cp "$tmp/regions.png" "$tmp/noface/b.png"
+ok "track without a face" "$crease" track -i "$tmp/noface" --rig "$tmp/head.crig" -o "$tmp/track_none"
+grep -q "tracked 0 of 2 frames" "$tmp/out" || { echo "FAIL: frames without a face should be reported as lost"; cat "$tmp/out"; fails=$((fails+1)); }
+bad "track missing input" "does not exist" "$crease" track -i "$tmp/nothing.mp4" --rig "$tmp/head.crig" -o "$tmp/t2"
+mkdir -p "$tmp/emptydir"
+bad "track empty folder" "no images" "$crease" track -i "$tmp/emptydir" --rig "$tmp/head.crig" -o "$tmp/t2"
+echo "not a video" > "$tmp/fake.mp4"
+bad "track unreadable video" "fake.mp4" "$crease" track -i "$tmp/fake.mp4" --rig "$tmp/head.crig" -o "$tmp/t2"
+bad "track regressor without model" "tracker_model" "$crease" track -i "$tmp/seq" --landmarks regressor -o "$tmp/t2"
+bad "ground-truth-prior needs a dataset" "needs a crease sequence dataset" "$crease" track -i "$tmp/noface" --rig "$tmp/head.crig" --ground-truth-prior -o "$tmp/t2"
+
 # Training (Sec. 4) on a tiny scan set: one old actor at 256² maps, one camera.
 ok "synth scans" "$crease" synth scans --rig "$tmp/head.crig" --actors 1 --seed 11 --cameras 2 --size 200x150 --samples 1 -e browInnerUp=1,browOuterUp=1 --set resolution=256 --set surface_min_vertices=1000 --set age_min=1 -o "$tmp/scans"
 ok "train" "$crease" train --scans "$tmp/scans" --out "$tmp/model.cdm" --set map_resolution=256 --set operator_resolution=96 --set patch_size=8 --set pca_dimensions=6 --set num_ferns=20 --set num_sampled_pixels=20 --set max_fit_vertices=300
@@ -91,6 +108,10 @@ bad "unknown expression" "no expression named 'smile'" "$crease" rig evaluate "$
 bad "bad weight" "not a number" "$crease" rig evaluate "$tmp/r.crig" -e jawOpen=lots -o "$tmp/y.ply"
 bad "unknown field" "no per-vertex field 'foo'" "$crease" mesh render "$tmp/e.vtp" --field foo -o "$tmp/y.png"
 bad "unknown subcommand" "" "$crease" frobnicate
+bad "train-tracker without data" "give --rig" "$crease" train-tracker --out "$tmp/t.ctrk"
+bad "train-tracker bad option" "num_ferns" "$crease" train-tracker --data "$tmp" --out "$tmp/t.ctrk" --set num_ferns=0
+bad "train-tracker missing folder" "not a folder of labelled faces" "$crease" train-tracker --data "$tmp/none" --out "$tmp/t.ctrk"
+[ ! -e "$tmp/t.ctrk" ] || { echo "FAIL: tracker written despite an error"; fails=$((fails+1)); }
 
 echo "$passes passed, $fails failed"
 [ "$fails" -eq 0 ]

@@ -22,5 +22,8 @@ void AddSynthCommands(CLI::App& app);
 void AddSynthDatasetCommands(CLI::App& app);
 // train (Sec. 4) and model info.
 void AddTrainCommands(CLI::App& app);
+// track (issue 5: the global face tracker).
+void AddTrackCommand(CLI::App& app);
+void AddTrainTrackerCommand(CLI::App& app);  // train-tracker (issue 5: the landmark regressor)
 
 }  // namespace crease::app

@@ -18,6 +18,8 @@ int main(int argc, char** argv) {
   crease::app::AddSynthCommands(app);
   crease::app::AddSynthDatasetCommands(app);
   crease::app::AddTrainCommands(app);
+  crease::app::AddTrackCommand(app);
+  crease::app::AddTrainTrackerCommand(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -6,9 +6,10 @@
 // Per frame t, with the identity α fixed, the fitter minimises over the expression
 // weights β ∈ [0, 1]^#E and the pose cam_from_head = (R, t):
 //
-//   E(β, R, t) = Σ_i ρ_i(‖W_i (π(R x_i(α, β) + t) − l_i)‖²)          landmark term, px²
-//              + λ_β ‖β‖²                                            expression prior
-//              + λ_Δβ ‖β − β^{t−1}‖² + λ_ω ‖log(R R^{t−1,ᵀ})‖² + λ_τ ‖t − t^{t−1}‖²   temporal prior
+//   E(β, R, t) = Σ_i ρ_i(‖W_i (π(R x_i(α, β) + t) − l_i)‖²)      landmark term, px²
+//              + λ_β ‖β‖²                                        expression prior
+//              + λ_Δβ ‖β − β^{t−1}‖² + λ_ω ‖log(R^{t−1} Rᵀ)‖²    temporal prior
+//              + λ_τ ‖(t − t^{t−1})_xy‖² + λ_z (t − t^{t−1})_z²   (not after a Reset)
 //
 //   x_i(α, β) = n_i + A_i α + B_i β   the rig's landmark vertex i in the head frame (mm);
 //             A_i, B_i its three rows of the identity and expression bases
@@ -19,11 +20,18 @@
 //             w_c = contour_weight, s = contour_tangent_weight (see below)
 //   ρ_i       Huber loss with scale landmark_robust_loss_px (in px, before W_i)
 //
-// Pose: R is parametrised per solve as exp([ω]×) · R_ref with ω ∈ R³ (an
-// angle-axis increment, radians) about the warm start R_ref, and t ∈ R³ (mm).
-// Jacobians are analytic: ∂pixel/∂point and ∂pixel/∂pose from
-// Camera::ProjectWithJacobians, chained with the landmark vertices' precomputed basis
-// rows (3×#E, 3×#I per landmark) and the left Jacobian of SO(3) for ω.
+// Solve (fast path, one Ceres problem per frame): R is parametrised as
+// exp([ω]×) · R_ref with ω ∈ R³ (an angle-axis increment, radians) about the warm
+// start R_ref (the previous frame's rotation), t ∈ R³ (mm); β has Ceres box bounds
+// [0, 1]. Jacobians are analytic: ∂pixel/∂point and ∂pixel/∂pose from
+// Camera::ProjectWithJacobians, chained with the 68 landmark vertices' precomputed
+// basis rows (3×#E, 3×#I each) and the left Jacobian of SO(3) for ω; Levenberg–
+// Marquardt with dense normal equations, a few iterations from the previous frame
+// (~0.9 ms per frame on one core at 68 points and 49 expressions,
+// bench/landmark_fit_bench.cc). The first frame, and the first after Reset(), starts
+// from a closed-form pose: a weak-perspective (affine) fit of the rig's neutral
+// landmarks to the landmarks, projected to a scaled rotation; then a pose-only solve,
+// then the full solve.
 //
 // Jaw contour (iBUG 1–17, 0-based 0–16): a detector places these points on the
 // visible face outline, where they slide along the outline as the head turns or the
@@ -35,10 +43,15 @@
 //
 // Identity: during the first identity_frames frames (after construction, or after a
 // Reset() while the identity is not yet fixed) every frame is fitted as above with
-// the current α, then α is re-estimated by a joint batch fit over all frames of the
-// phase so far (α shared; β^j, R^j, t^j per frame; prior λ_α ‖α‖², identity
-// coefficients in units of their standard deviation), and the frame is refitted with
-// the new α. After identity_frames frames α is fixed.
+// the current α; every identity_fit_interval frames of the phase and at its last
+// frame, α is re-estimated by a joint batch fit over all frames of the phase so far
+// (α shared; β^j, R^j, t^j per frame, warm-started; the landmark terms and expression
+// prior above plus λ_α ‖α‖², identity coefficients in units of their standard
+// deviation; no temporal terms), and the frame is refitted with the new α. After
+// identity_frames frames α is fixed. The batch costs ~0.6 ms per frame and iteration:
+// the default phase (20 frames, batches at 5, 10, 15, 20 with 5 iterations) takes
+// ~0.2 s in all on one core, its last frame ~60 ms. Identity modes that barely move
+// the 68 landmarks (e.g. the back of the head) stay near 0 under the prior.
 //
 // Weights are in px² (the landmark term is a sum of squared pixel residuals): the
 // defaults suit faces ~150–250 px wide (a 640×480 camera at ~0.5 m); scale them with
@@ -76,21 +89,30 @@ class OptionVisitor;
 struct LandmarkFitOptions {
   // λ_β: expression prior (pulls weights to 0), px² per unit weight².
   double fit_expression_prior_weight = 5.0;
-  // λ_Δβ: temporal prior on the change of the expression weights from the previous
-  // frame's fit (against jitter), px² per unit weight². 0 disables.
-  double fit_temporal_expression_weight = 100.0;
-  // λ_ω: temporal prior on the head rotation's change from the previous frame,
-  // px² per rad² (1° ≈ 0.0175 rad).
-  double fit_temporal_rotation_weight = 2e4;
-  // λ_τ: temporal prior on the translation's change from the previous frame, px² per mm².
-  double fit_temporal_translation_weight = 2.0;
+  // Temporal prior against jitter: weights on the change from the previous frame's
+  // fit (0 disables each). They trade jitter against lag: with the defaults a
+  // still face under 1 px landmark noise jitters ~2.5× less in its expression weights
+  // and ~1.5× less in rotation than without, and a sudden jump (17°, 22 mm) is caught
+  // up within a few frames (tests/landmark_fit_test.cc).
+  // λ_Δβ: change of the expression weights, px² per unit weight².
+  double fit_temporal_expression_weight = 50.0;
+  // λ_ω: change of the head rotation, px² per rad² (1° ≈ 0.0175 rad).
+  double fit_temporal_rotation_weight = 2000.0;
+  // λ_τ: change of the translation across the image (camera x, y), px² per mm².
+  double fit_temporal_translation_weight = 0.5;
+  // λ_z: change of the depth (camera z), px² per mm². Depth is ~z/r ≈ 8× less
+  // observed than x, y (r the face's radius), so its prior is weaker to avoid lag.
+  double fit_temporal_depth_weight = 0.02;
   // λ_α: identity prior (coefficients in units of their standard deviation), px² per std².
   double fit_identity_prior_weight = 20.0;
-  // Frames over which the identity is estimated (joint batch fit re-run at each of
-  // them), after which it is fixed. 0 = keep the mean identity (α = 0) from the start.
+  // Frames over which the identity is estimated, after which it is fixed. 0 = keep
+  // the mean identity (α = 0) from the start.
   int identity_frames = 20;
-  // Solver iterations of each identity batch fit.
-  int identity_fit_iterations = 10;
+  // The joint batch fit over the phase's frames so far runs every this many frames of
+  // the phase, and at its last frame (1 = at every frame of the phase).
+  int identity_fit_interval = 5;
+  // Solver iterations of each identity batch fit (warm-started from the previous one).
+  int identity_fit_iterations = 5;
   // w_c: weight of the jaw-contour points (iBUG 1–17) relative to the inner points.
   double contour_weight = 0.5;
   // s: weight of the contour residual's component along the detected outline,
@@ -103,6 +125,10 @@ struct LandmarkFitOptions {
   int fit_max_iterations = 10;
   // Solver iterations at (re)initialisation (first frame, after Reset()).
   int fit_initial_max_iterations = 50;
+  // A solve stops when an iteration lowers the energy by less than this fraction
+  // (Ceres' function_tolerance; 10⁻⁴ of ~50 px² is far below the landmark noise).
+  // (Re)initialisation frames use 1/100 of it.
+  double fit_function_tolerance = 1e-4;
   // Linear solver of the per-frame problem: "dense_normal_cholesky" or "dense_qr".
   std::string fit_linear_solver = "dense_normal_cholesky";
 
@@ -118,8 +144,8 @@ struct LandmarkFrameFit {
   // projected rig landmark and the landmark, px (jaw-contour points: the distance
   // across the detected outline).
   double rms_px = 0.0;
-  int iterations = 0;      // solver iterations of the frame's final solve
-  bool converged = false;  // the final solve met a convergence tolerance
+  int iterations = 0;      // solver iterations of the frame's solve(s) (identity batch fits excluded)
+  bool converged = false;  // the frame's last solve met a convergence tolerance
 };
 
 // The global tracker's per-frame rig fit. Holds the state that persists across frames
@@ -173,6 +199,7 @@ class LandmarkRigFitter {
     Eigen::Matrix2d W;        // W_i (√confidence, contour weighting)
     Eigen::Matrix2d M;        // the residual rms_px measures: I, or [n_iᵀ; 0] on the contour
     double loss_scale = 0.0;  // Huber scale on W_i·(π − l_i), px
+    double weight = 0.0;      // confidence × contour weight (the closed-form initial pose's weight)
   };
   struct PhaseFrame {
     std::vector<PointTerm> terms;

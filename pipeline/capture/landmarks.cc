@@ -20,12 +20,14 @@ void DlibLandmarkOptions::VisitFields(OptionVisitor& v) {
   v.Field("upsample", upsample);
   v.Field("detection_threshold", detection_threshold);
   v.Field("max_scale_change", max_scale_change);
+  v.Field("redetect_interval", redetect_interval);
 }
 
 void DlibLandmarkOptions::Check() const {
   CheckGe("DlibLandmarkOptions", "upsample", upsample, 0);
   CheckLe("DlibLandmarkOptions", "upsample", upsample, 3);
   CheckGt("DlibLandmarkOptions", "max_scale_change", max_scale_change, 1.0);
+  CheckGe("DlibLandmarkOptions", "redetect_interval", redetect_interval, 0);
 }
 
 cv::Mat ToGray8(const cv::Mat& image) {
@@ -70,7 +72,23 @@ struct DlibLandmarkSource::Impl {
   dlib::frontal_face_detector detector = dlib::get_frontal_face_detector();
   dlib::shape_predictor predictor;
   MatX2d previous;  // last frame's landmarks (empty after a loss)
+  // The detector's box relative to stable landmarks (eye corners and nose), learnt
+  // on the last detection: box side = scale · d, box centre = anchor + offset · d,
+  // d the distance of the outer eye corners, anchor the mean of iBUG 28–48.
+  double box_scale = 0.0;
+  int frames_since_detection = 0;
+  Eigen::Vector2d box_offset = Eigen::Vector2d::Zero();
 };
+
+namespace {
+
+// Anchor (mean of the nose and eye points, iBUG 28–48) and size (outer eye corners).
+void StableFrame(const MatX2d& p, Eigen::Vector2d* anchor, double* size) {
+  *anchor = p.middleRows(27, 21).colwise().mean().transpose();
+  *size = std::max(1e-6, (p.row(36) - p.row(45)).norm());
+}
+
+}  // namespace
 
 DlibLandmarkSource::DlibLandmarkSource(const DlibLandmarkOptions& options) : impl_(std::make_unique<Impl>()) {
   options.Check();
@@ -132,19 +150,37 @@ MatX2d DlibLandmarkSource::Landmarks(const cv::Mat& image, const FaceBox& box) c
 LandmarkResult DlibLandmarkSource::Track(const cv::Mat& image) {
   LandmarkResult r;
   Impl& m = *impl_;
-  if (m.previous.rows() == 68) {
-    // dlib's predictor expects its detector's box: roughly the landmarks' box of
-    // the previous frame, slightly enlarged and shifted down (brows are near the top).
-    FaceBox box = BoxOfPoints(m.previous, 1.0);
-    const double size = std::max(box.width, box.height);
-    FaceBox guess{box.x + 0.5 * box.width - 0.5 * size, box.y + 0.5 * box.height - 0.5 * size + 0.02 * size, size,
-                  size, 0.0};
+  if (m.previous.rows() == 68 && m.box_scale > 0.0) {
+    // dlib's predictor expects its detector's box: placed relative to the previous
+    // frame's stable landmarks as the detector's box was on the last detection
+    // (the landmarks' own bounding box changes with the expression and would let
+    // the box drift frame by frame).
+    Eigen::Vector2d anchor;
+    double d;
+    StableFrame(m.previous, &anchor, &d);
+    const double size = m.box_scale * d;
+    const Eigen::Vector2d c = anchor + m.box_offset * d;
+    FaceBox guess{c.x() - 0.5 * size, c.y() - 0.5 * size, size, size, 0.0};
     const MatX2d p = Landmarks(image, guess);
     const FaceBox nb = BoxOfPoints(p);
-    const double ratio = std::max(nb.width, nb.height) / std::max(1e-6, size);
+    const double ratio = (p.row(36) - p.row(45)).norm() / d;
     const bool inside = nb.x >= -0.25 * nb.width && nb.y >= -0.25 * nb.height &&
                         nb.x + nb.width <= image.cols + 0.25 * nb.width && nb.y + nb.height <= image.rows + 0.25 * nb.height;
-    if (ratio < m.options.max_scale_change && ratio > 1.0 / m.options.max_scale_change && inside) {
+    // Periodic verification: the detector must find a face where the track is;
+    // when it finds none there (the track followed an occluder or drifted), the
+    // track is dropped and the detection below restarts it.
+    bool verified = true;
+    if (m.options.redetect_interval > 0 && ++m.frames_since_detection >= m.options.redetect_interval) {
+      m.frames_since_detection = 0;
+      verified = false;
+      for (const FaceBox& f : Detect(image)) {
+        const double ix = std::max(0.0, std::min(f.x + f.width, guess.x + guess.width) - std::max(f.x, guess.x));
+        const double iy = std::max(0.0, std::min(f.y + f.height, guess.y + guess.height) - std::max(f.y, guess.y));
+        const double inter = ix * iy, uni = f.width * f.height + guess.width * guess.height - inter;
+        if (uni > 0 && inter / uni > 0.3) verified = true;
+      }
+    }
+    if (verified && ratio < m.options.max_scale_change && ratio > 1.0 / m.options.max_scale_change && inside) {
       r.found = true;
       r.box = guess;
       r.points = p;
@@ -154,12 +190,18 @@ LandmarkResult DlibLandmarkSource::Track(const cv::Mat& image) {
     m.previous.resize(0, 2);  // lost: detect below
   }
   r.detected = true;
+  m.frames_since_detection = 0;
   const std::vector<FaceBox> faces = Detect(image);
   if (faces.empty()) return r;
   r.found = true;
   r.box = faces.front();
   r.points = Landmarks(image, r.box);
   m.previous = r.points;
+  Eigen::Vector2d anchor;
+  double d;
+  StableFrame(r.points, &anchor, &d);
+  m.box_scale = std::max(r.box.width, r.box.height) / d;
+  m.box_offset = (Eigen::Vector2d(r.box.x + 0.5 * r.box.width, r.box.y + 0.5 * r.box.height) - anchor) / d;
   return r;
 }
 

@@ -45,11 +45,17 @@ struct DlibLandmarkOptions {
   std::string model_path = "/usr/share/dlib/shape_predictor_68_face_landmarks.dat";
   int upsample = 0;                 // HOG pyramid upsampling steps (1 finds faces down to ~40 px)
   double detection_threshold = 0.0; // HOG SVM score threshold
-  // Tracking: the face box of the next frame is the previous landmarks' box, and
-  // the detector runs only at the start and after a loss. The face counts as
-  // lost when the landmarks' box changes size by more than this factor between
-  // frames or leaves the image.
+  // Tracking: the face box of the next frame is placed on the previous frame's eye
+  // and nose landmarks as the detector's box was on the last detection, and the
+  // detector runs only at the start and after a loss. The face counts as lost
+  // when the outer eye corners' distance changes by more than this factor between
+  // frames or the landmarks leave the image.
   double max_scale_change = 1.5;
+  // Every this many tracked frames the detector runs again and the track is kept
+  // only if a detected face overlaps it (intersection over union > 0.3); otherwise
+  // the face counts as lost and the detection restarts the track. This is how the
+  // tracker leaves an occluder or a drifted track. 0 = never (fastest).
+  int redetect_interval = 10;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;

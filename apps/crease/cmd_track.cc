@@ -1,0 +1,261 @@
+// `crease track`: the global face tracker on a video, an image folder or a studio
+// sequence (issue 5).
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "apps/crease/commands.h"
+#include "core/color.h"
+#include "core/error.h"
+#include "core/face_rig.h"
+#include "core/file_util.h"
+#include "core/json_io.h"
+#include "core/mesh_io.h"
+#include "core/options.h"
+#include "core/progress.h"
+#include "core/vtk_io.h"
+#include "eval/tracking_metrics.h"
+#include "pipeline/capture/frame_source.h"
+#include "pipeline/capture/tracker.h"
+
+namespace crease::app {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+json PoseJson(const Rigid3d& p) {
+  const Eigen::Quaterniond& q = p.rotation;
+  return {{"rotation_wxyz", {q.w(), q.x(), q.y(), q.z()}},
+          {"translation_mm", {p.translation.x(), p.translation.y(), p.translation.z()}}};
+}
+
+// The frame with the landmarks (green) and the fitted rig's face wireframe (blue).
+cv::Mat PreviewFrame(const cv::Mat& linear_rgb, const TrackedFrame& t, const MatX2d& projected, const MatX3i& face_F) {
+  cv::Mat bgr(linear_rgb.size(), CV_8UC3);
+  for (int j = 0; j < linear_rgb.rows; ++j) {
+    const cv::Vec3f* p = linear_rgb.ptr<cv::Vec3f>(j);
+    cv::Vec3b* q = bgr.ptr<cv::Vec3b>(j);
+    for (int i = 0; i < linear_rgb.cols; ++i) {
+      for (int c = 0; c < 3; ++c) {
+        q[i][2 - c] = static_cast<uint8_t>(std::clamp(255.0 * LinearToSrgb(std::clamp(p[i][c], 0.0f, 1.0f)) + 0.5, 0.0, 255.0));
+      }
+    }
+  }
+  if (t.tracked && projected.rows() > 0) {
+    // The fitted rig's face as a faint wireframe (every 4th triangle, 35 % opacity).
+    cv::Mat wire = bgr.clone();
+    for (int f = 0; f < face_F.rows(); f += 4) {
+      for (int k = 0; k < 3; ++k) {
+        const Eigen::Vector2d a = projected.row(face_F(f, k)), b = projected.row(face_F(f, (k + 1) % 3));
+        if (!a.allFinite() || !b.allFinite()) continue;
+        cv::line(wire, cv::Point2d(a.x(), a.y()), cv::Point2d(b.x(), b.y()), cv::Scalar(230, 140, 40), 1, cv::LINE_AA);
+      }
+    }
+    cv::addWeighted(wire, 0.35, bgr, 0.65, 0.0, bgr);
+  }
+  for (int i = 0; i < t.landmarks.rows(); ++i) {
+    cv::circle(bgr, cv::Point2d(t.landmarks(i, 0), t.landmarks(i, 1)), 2, cv::Scalar(60, 220, 60), -1, cv::LINE_AA);
+  }
+  cv::putText(bgr, fmt::format("{} {:.2f}", t.tracked ? "tracked" : "lost", t.confidence), cv::Point(8, 18),
+              cv::FONT_HERSHEY_SIMPLEX, 0.5, t.tracked ? cv::Scalar(60, 220, 60) : cv::Scalar(40, 40, 230), 1, cv::LINE_AA);
+  return bgr;
+}
+
+}  // namespace
+
+void AddTrackCommand(CLI::App& app) {
+  auto* cmd = app.add_subcommand("track", "Global face tracker: landmarks and the rig fitted per frame (issue 5)");
+  static std::string input, rig_path, landmarks = "dlib", tracker_model, camera_path, out, preview;
+  static double fov = 50.0, noise = 0.0;
+  static int max_frames = -1;
+  static bool no_meshes = false, gt_prior = false;
+  static uint64_t seed = 1;
+  static std::vector<std::string> sets;
+  cmd->add_option("--input,-i", input, "Video file, image folder or crease sequence dataset")->required();
+  cmd->add_option("--rig", rig_path, "Rig (.crig); default: the dataset's rig.crig");
+  cmd->add_option("--landmarks", landmarks, "Landmark source: dlib or regressor")->capture_default_str();
+  cmd->add_option("--tracker", tracker_model, "Regressor model (from `crease train-tracker`)");
+  cmd->add_option("--camera", camera_path, "Camera JSON (intrinsics); default: the dataset's, else --fov");
+  cmd->add_option("--fov", fov, "Horizontal field of view, degrees, when there is no calibration")->capture_default_str();
+  cmd->add_option("--out,-o", out, "Output folder")->required();
+  cmd->add_option("--preview", preview, "Preview video (.avi: MJPG, .mp4: mp4v) with landmarks and mesh");
+  cmd->add_option("--max-frames", max_frames, "Stop after this many frames");
+  cmd->add_flag("--no-meshes", no_meshes, "Skip the per-frame PLY/VTP meshes");
+  cmd->add_flag("--ground-truth-prior", gt_prior,
+                "Experimental control: fit the rig to the dataset's ground-truth landmarks (+ --noise), "
+                "to isolate later stages; never a default");
+  cmd->add_option("--noise", noise, "Ground-truth-prior landmark noise, px (σ)")->capture_default_str();
+  cmd->add_option("--seed", seed, "Seed of the ground-truth-prior noise")->capture_default_str();
+  cmd->add_option("--set", sets, "Tracker option KEY=VALUE (repeatable; pipeline/capture/tracker.h TrackerOptions)");
+  cmd->callback([] {
+    TrackerOptions options;
+    options.landmark_source = landmarks;
+    options.tracker_model = tracker_model;
+    if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &options);
+    options.Check();
+    auto frames = OpenFrameSource(input);
+    const FrameSourceInfo& info = frames->info();
+    const bool dataset = info.kind == "dataset";
+    if (rig_path.empty()) {
+      Require(dataset, "--rig is required unless the input is a crease dataset");
+      rig_path = (info.path / "rig.crig").string();
+    }
+    const FaceRig rig = ReadRig(rig_path);
+    CameraIntrinsics K;
+    if (!camera_path.empty()) {
+      K = ReadCamera(camera_path).intrinsics;
+    } else if (info.camera) {
+      K = info.camera->intrinsics;
+    } else {
+      K = CameraIntrinsics::FromFov(fov, info.width, info.height);
+    }
+    Require(K.width == info.width && K.height == info.height,
+            fmt::format("the camera is {}×{} but the frames are {}×{}", K.width, K.height, info.width, info.height));
+    Require(!gt_prior || dataset, "--ground-truth-prior needs a crease sequence dataset as input");
+    // The tracker, or the experimental control: the rig fitted to the dataset's
+    // ground-truth landmark projections plus noise (landmark_fit.h).
+    std::unique_ptr<FaceTracker> tracker;
+    std::unique_ptr<GroundTruthPriorFitter> gt_fitter;
+    if (gt_prior) {
+      GroundTruthPriorOptions go;
+      go.gt_prior_noise_px = noise;
+      go.gt_prior_noise_seed = seed;
+      gt_fitter = std::make_unique<GroundTruthPriorFitter>(rig, K, options.fit, go);
+    } else {
+      tracker = std::make_unique<FaceTracker>(rig, K, MakeLandmarkSource(options), options);
+    }
+    const LandmarkRigFitter& fitter = gt_prior ? gt_fitter->fitter() : tracker->fitter();
+    int gt_count = 0;
+    auto track = [&](const cv::Mat& image) {
+      if (!gt_prior) {
+        TrackedFrame t = tracker->Track(image);
+        t.frame = frames->index();
+        return t;
+      }
+      TrackedFrame t;
+      t.frame = frames->index();
+      const auto t0 = std::chrono::steady_clock::now();
+      t.fit = gt_fitter->Fit(ReadFrameTruth(info.path, t.frame, rig.num_vertices()).landmarks);
+      t.fit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+      t.landmarks = gt_fitter->last_landmarks();
+      t.tracked = true;
+      t.detected = gt_count++ == 0;
+      t.confidence = 1.0;
+      return t;
+    };
+
+    const fs::path dir(out);
+    fs::create_directories(dir / "frames");
+    if (!no_meshes) fs::create_directories(dir / "meshes");
+    std::unique_ptr<PvdWriter> series = no_meshes ? nullptr : std::make_unique<PvdWriter>(dir / "tracking.pvd");
+    cv::VideoWriter writer;
+    if (!preview.empty()) {
+      const std::string ext = LowerExtension(preview);
+      const int fourcc = ext == ".mp4" ? cv::VideoWriter::fourcc('m', 'p', '4', 'v') : cv::VideoWriter::fourcc('M', 'J', 'P', 'G');
+      writer.open(preview, fourcc, info.fps, cv::Size(info.width, info.height));
+      Require(writer.isOpened(), fmt::format("{}: cannot write this video (try .avi)", preview));
+    }
+    const MatX3i face_F = FaceChartTriangles(rig);
+    const int total = max_frames > 0 && (info.frame_count < 0 || max_frames < info.frame_count) ? max_frames : info.frame_count;
+    Progress progress("tracking", std::max(total, 1));
+    cv::Mat frame;
+    int n = 0, tracked = 0, detections = 0;
+    double landmark_ms = 0, fit_ms = 0;
+    double err_lm = 0, err_lm_iod = 0, err_fit = 0, err_vertex = 0;
+    int err_frames = 0;
+    const bool has_truth = dataset && fs::is_directory(info.path / "truth");
+    while ((max_frames < 0 || n < max_frames) && frames->Next(&frame)) {
+      const TrackedFrame t = track(frame);
+      ++n;
+      tracked += t.tracked;
+      detections += t.detected;
+      landmark_ms += t.landmarks_ms;
+      fit_ms += t.fit_ms;
+      json j;
+      j["frame"] = t.frame;
+      j["tracked"] = t.tracked;
+      j["detected"] = t.detected;
+      j["confidence"] = t.confidence;
+      json lm = json::array();
+      for (int i = 0; i < t.landmarks.rows(); ++i) lm.push_back({t.landmarks(i, 0), t.landmarks(i, 1)});
+      j["landmarks"] = lm;
+      j["landmarks_ms"] = t.landmarks_ms;
+      j["fit_ms"] = t.fit_ms;
+      MatX2d projected;
+      if (t.tracked) {
+        j["cam_from_head"] = PoseJson(t.fit.cam_from_head);
+        json w = json::object();
+        for (int e = 0; e < rig.num_expressions(); ++e) w[rig.expression_names[e]] = t.fit.expression[e];
+        j["expression"] = w;
+        j["rms_px"] = t.fit.rms_px;
+        const MatX3d V = fitter.HeadVertices(t.fit);
+        const Camera cam(K, t.fit.cam_from_head);
+        projected = cam.ProjectAll(V);
+        if (!no_meshes) {
+          TriMesh mesh = rig.neutral;
+          mesh.V = V;
+          mesh.N.resize(0, 3);
+          WritePly(dir / "meshes" / fmt::format("{:06d}.ply", t.frame), mesh);
+          const fs::path vtp = dir / "meshes" / fmt::format("{:06d}.vtp", t.frame);
+          WriteVtp(vtp, mesh);
+          series->Add(t.frame / info.fps, vtp);
+          series->Write();
+        }
+        if (has_truth) {
+          const FrameTruth truth = ReadFrameTruth(info.path, t.frame, rig.num_vertices());
+          const FrameTrackingError e =
+              CompareToTruth(truth, t.landmarks, fitter.ProjectLandmarks(t.fit), projected);
+          j["error"] = {{"landmark_px", e.landmark_px},
+                        {"landmark_iod", e.landmark_iod},
+                        {"fit_landmark_px", e.fit_landmark_px},
+                        {"vertex_px", e.vertex_px}};
+          err_lm += e.landmark_px;
+          err_lm_iod += e.landmark_iod;
+          err_fit += e.fit_landmark_px;
+          err_vertex += e.vertex_px;
+          ++err_frames;
+        }
+      }
+      WriteJsonFile(dir / "frames" / fmt::format("{:06d}.json", t.frame), j);
+      if (writer.isOpened()) writer.write(PreviewFrame(frame, t, projected, face_F));
+      progress.Advance();
+    }
+    progress.Finish();
+    Require(n > 0, fmt::format("{}: no frames", input));
+    json summary;
+    summary["input"] = input;
+    summary["landmark_source"] = gt_prior ? "ground-truth-prior" : landmarks;
+    summary["frames"] = n;
+    summary["tracked_frames"] = tracked;
+    summary["detections"] = detections;
+    summary["landmarks_ms"] = landmark_ms / n;
+    summary["fit_ms"] = fit_ms / n;
+    summary["tracking_fps"] = 1000.0 * n / std::max(landmark_ms + fit_ms, 1e-9);
+    summary["identity"] = std::vector<double>(fitter.identity().data(),
+                                              fitter.identity().data() + fitter.identity().size());
+    summary["options"] = json::parse(OptionsToJson(options));
+    std::printf("tracked %d of %d frames (%d detections); landmarks %.2f ms, rig fit %.2f ms per frame (%.0f fps)\n",
+                tracked, n, detections, landmark_ms / n, fit_ms / n, 1000.0 * n / std::max(landmark_ms + fit_ms, 1e-9));
+    if (err_frames > 0) {
+      summary["error"] = {{"frames", err_frames},
+                          {"landmark_px", err_lm / err_frames},
+                          {"landmark_iod", err_lm_iod / err_frames},
+                          {"fit_landmark_px", err_fit / err_frames},
+                          {"vertex_px", err_vertex / err_frames}};
+      std::printf("against ground truth (%d tracked frames): landmarks %.2f px (%.3f IOD), fitted rig's landmarks "
+                  "%.2f px, visible vertices %.2f px\n",
+                  err_frames, err_lm / err_frames, err_lm_iod / err_frames, err_fit / err_frames,
+                  err_vertex / err_frames);
+    }
+    WriteJsonFile(dir / "summary.json", summary);
+    std::printf("wrote %s\n", out.c_str());
+  });
+}
+
+}  // namespace crease::app

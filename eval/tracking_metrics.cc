@@ -1,0 +1,76 @@
+#include "eval/tracking_metrics.h"
+
+#include <cstring>
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "core/error.h"
+#include "core/file_util.h"
+#include "core/json_io.h"
+
+namespace crease {
+
+namespace fs = std::filesystem;
+
+FrameTruth ReadFrameTruth(const fs::path& dataset, int frame, int num_vertices) {
+  const std::string name = fmt::format("{:06d}", frame);
+  const fs::path jpath = dataset / "truth" / (name + ".json");
+  Require(fs::is_regular_file(jpath), fmt::format("{}: no ground truth for frame {}", jpath.string(), frame));
+  const nlohmann::json j = ReadJsonFile(jpath);
+  FrameTruth t;
+  try {
+    const auto& lms = j.at("landmarks");
+    Require(lms.size() == 68, fmt::format("{}: expected 68 landmarks, found {}", jpath.string(), lms.size()));
+    t.landmarks.resize(68, 2);
+    t.landmark_visible.resize(68);
+    for (int i = 0; i < 68; ++i) {
+      t.landmarks(i, 0) = lms[i].at("x").get<double>();
+      t.landmarks(i, 1) = lms[i].at("y").get<double>();
+      t.landmark_visible[i] = lms[i].value("visible", true) ? 1 : 0;
+    }
+    const auto& c = j.at("cam_from_head");
+    const auto q = c.at("rotation_wxyz").get<std::vector<double>>();
+    const auto tr = c.at("translation_mm").get<std::vector<double>>();
+    t.cam_from_head = Rigid3d(Eigen::Quaterniond(q[0], q[1], q[2], q[3]), Eigen::Vector3d(tr[0], tr[1], tr[2]));
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(fmt::format("{}: malformed ground truth: {}", jpath.string(), e.what()));
+  }
+  const fs::path bpath = dataset / "truth" / (name + "_vertices.bin");
+  const std::string bytes = ReadFileToString(bpath);
+  Require(bytes.size() == static_cast<size_t>(num_vertices) * 3 * sizeof(float),
+          fmt::format("{}: {} bytes, expected {} (3 floats for each of the rig's {} vertices)", bpath.string(),
+                      bytes.size(), static_cast<size_t>(num_vertices) * 12, num_vertices));
+  std::vector<float> v(static_cast<size_t>(num_vertices) * 3);
+  std::memcpy(v.data(), bytes.data(), bytes.size());
+  t.vertices.resize(num_vertices, 2);
+  t.vertex_visible.resize(num_vertices);
+  for (int i = 0; i < num_vertices; ++i) {
+    t.vertices(i, 0) = v[3 * i];
+    t.vertices(i, 1) = v[3 * i + 1];
+    t.vertex_visible[i] = v[3 * i + 2] > 0.5f;
+  }
+  return t;
+}
+
+FrameTrackingError CompareToTruth(const FrameTruth& truth, const MatX2d& landmarks, const MatX2d& projected_landmarks,
+                                  const MatX2d& projected_vertices) {
+  FrameTrackingError e;
+  const double iod = (truth.landmarks.row(36) - truth.landmarks.row(45)).norm();
+  if (landmarks.rows() == 68) {
+    e.landmark_px = (landmarks - truth.landmarks).rowwise().norm().mean();
+    e.landmark_iod = iod > 0 ? e.landmark_px / iod : 0.0;
+  }
+  if (projected_landmarks.rows() == 68) e.fit_landmark_px = (projected_landmarks - truth.landmarks).rowwise().norm().mean();
+  if (projected_vertices.rows() == truth.vertices.rows()) {
+    double sum = 0;
+    for (int i = 0; i < truth.vertices.rows(); ++i) {
+      if (!truth.vertex_visible[i]) continue;
+      sum += (projected_vertices.row(i) - truth.vertices.row(i)).norm();
+      ++e.visible_vertices;
+    }
+    e.vertex_px = e.visible_vertices ? sum / e.visible_vertices : 0.0;
+  }
+  return e;
+}
+
+}  // namespace crease
