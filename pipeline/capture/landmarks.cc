@@ -182,7 +182,19 @@ LandmarkResult DlibLandmarkSource::Track(const cv::Mat& image) {
     if (m.options.redetect_interval > 0 && ++m.frames_since_detection >= m.options.redetect_interval) {
       m.frames_since_detection = 0;
       verified = false;
-      for (const FaceBox& f : Detect(image)) {
+      // The detector runs on the track's neighbourhood only (twice the box), which
+      // costs a fraction of a full-frame detection.
+      const double cx = guess.x + 0.5 * guess.width, cy = guess.y + 0.5 * guess.height;
+      const int x0 = std::clamp(static_cast<int>(cx - guess.width), 0, image.cols - 1);
+      const int y0 = std::clamp(static_cast<int>(cy - guess.height), 0, image.rows - 1);
+      const int x1 = std::clamp(static_cast<int>(cx + guess.width), x0 + 1, image.cols);
+      const int y1 = std::clamp(static_cast<int>(cy + guess.height), y0 + 1, image.rows);
+      std::vector<FaceBox> found = Detect(image(cv::Rect(x0, y0, x1 - x0, y1 - y0)));
+      for (FaceBox& f : found) {
+        f.x += x0;
+        f.y += y0;
+      }
+      for (const FaceBox& f : found) {
         const double ix = std::max(0.0, std::min(f.x + f.width, guess.x + guess.width) - std::max(f.x, guess.x));
         const double iy = std::max(0.0, std::min(f.y + f.height, guess.y + guess.height) - std::max(f.y, guess.y));
         const double inter = ix * iy, uni = f.width * f.height + guess.width * guess.height - inter;

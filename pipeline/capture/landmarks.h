@@ -55,7 +55,7 @@ struct DlibLandmarkOptions {
   // only if a detected face overlaps it (intersection over union > 0.3); otherwise
   // the face counts as lost and the detection restarts the track. This is how the
   // tracker leaves an occluder or a drifted track. 0 = never (fastest).
-  int redetect_interval = 10;
+  int redetect_interval = 30;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
