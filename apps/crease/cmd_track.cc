@@ -165,8 +165,8 @@ void AddTrackCommand(CLI::App& app) {
     const int total = max_frames > 0 && (info.frame_count < 0 || max_frames < info.frame_count) ? max_frames : info.frame_count;
     Progress progress("tracking", std::max(total, 1));
     cv::Mat frame;
-    int n = 0, tracked = 0, detections = 0;
-    double landmark_ms = 0, fit_ms = 0;
+    int n = 0, tracked = 0, detections = 0, steady = 0;
+    double landmark_ms = 0, fit_ms = 0, steady_ms = 0;
     double err_lm = 0, err_lm_iod = 0, err_fit = 0, err_vertex = 0;
     int err_frames = 0;
     const bool has_truth = dataset && fs::is_directory(info.path / "truth");
@@ -177,6 +177,10 @@ void AddTrackCommand(CLI::App& app) {
       detections += t.detected;
       landmark_ms += t.landmarks_ms;
       fit_ms += t.fit_ms;
+      if (t.tracked && !t.detected && fitter.identity_fixed()) {  // after detection and the identity phase
+        steady_ms += t.landmarks_ms + t.fit_ms;
+        ++steady;
+      }
       json j;
       j["frame"] = t.frame;
       j["tracked"] = t.tracked;
@@ -237,11 +241,17 @@ void AddTrackCommand(CLI::App& app) {
     summary["landmarks_ms"] = landmark_ms / n;
     summary["fit_ms"] = fit_ms / n;
     summary["tracking_fps"] = 1000.0 * n / std::max(landmark_ms + fit_ms, 1e-9);
+    summary["steady_frames"] = steady;
+    summary["steady_ms"] = steady ? steady_ms / steady : 0.0;
     summary["identity"] = std::vector<double>(fitter.identity().data(),
                                               fitter.identity().data() + fitter.identity().size());
     summary["options"] = json::parse(OptionsToJson(options));
     std::printf("tracked %d of %d frames (%d detections); landmarks %.2f ms, rig fit %.2f ms per frame (%.0f fps)\n",
                 tracked, n, detections, landmark_ms / n, fit_ms / n, 1000.0 * n / std::max(landmark_ms + fit_ms, 1e-9));
+    if (steady > 0) {
+      std::printf("after detection and the identity phase (%d frames): %.2f ms per frame (%.0f fps)\n", steady,
+                  steady_ms / steady, 1000.0 * steady / std::max(steady_ms, 1e-9));
+    }
     if (err_frames > 0) {
       summary["error"] = {{"frames", err_frames},
                           {"landmark_px", err_lm / err_frames},
