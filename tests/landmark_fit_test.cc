@@ -10,6 +10,7 @@
 
 #include "core/rng.h"
 #include "synth/procedural_rig.h"
+#include "tests/synth_test_util.h"
 #include "tests/test_util.h"
 
 namespace crease {
@@ -17,10 +18,7 @@ namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 
-const FaceRig& Rig() {
-  static const FaceRig rig = BuildProceduralRig();
-  return rig;
-}
+const FaceRig& Rig() { return testing::ProceduralRig(); }
 
 CameraIntrinsics Intrinsics() { return CameraIntrinsics::FromFov(40.0, 640, 480); }
 

@@ -7,15 +7,13 @@
 #include <cmath>
 
 #include "synth/procedural_rig.h"
+#include "tests/synth_test_util.h"
 #include "tests/test_util.h"
 
 namespace crease {
 namespace {
 
-const FaceRig& Rig() {
-  static const FaceRig rig = BuildProceduralRig();
-  return rig;
-}
+const FaceRig& Rig() { return testing::ProceduralRig(); }
 
 Eigen::VectorXd Weights(const FaceRig& rig, std::initializer_list<std::pair<const char*, double>> w) {
   Eigen::VectorXd e = Eigen::VectorXd::Zero(rig.num_expressions());

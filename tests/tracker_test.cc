@@ -13,6 +13,7 @@
 #include "pipeline/capture/frame_source.h"
 #include "synth/dataset.h"
 #include "synth/procedural_rig.h"
+#include "tests/synth_test_util.h"
 #include "tests/test_util.h"
 
 namespace crease {
@@ -21,16 +22,12 @@ namespace {
 namespace fs = std::filesystem;
 using testing::WriteText;
 
-const FaceRig& Rig() {
-  static const FaceRig rig = BuildProceduralRig();
-  return rig;
-}
+const FaceRig& Rig() { return testing::ProceduralRig(); }
 
 // 24 frames of the `talking` preset at 320×240 under front light, no maps: written once per process.
 const fs::path& Talking() {
   static const fs::path dir = [] {
-    const fs::path d = fs::path(::testing::TempDir()) / "crease_tests" / ("tracker_talking_" + std::to_string(getpid()));
-    fs::remove_all(d);
+    const fs::path d = testing::FixtureDir("tracker_talking");
     ActorOptions ao;
     ao.resolution = 256;
     ao.surface_min_vertices = 1000;

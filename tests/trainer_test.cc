@@ -13,6 +13,7 @@
 #include "core/mesh_io.h"
 #include "synth/dataset.h"
 #include "synth/procedural_rig.h"
+#include "tests/synth_test_util.h"
 #include "tests/test_util.h"
 
 namespace crease {
@@ -21,17 +22,12 @@ namespace {
 namespace fs = std::filesystem;
 using testing::WriteText;
 
-const FaceRig& Rig() {
-  static const FaceRig rig = BuildProceduralRig();
-  return rig;
-}
+const FaceRig& Rig() { return testing::ProceduralRig(); }
 
 // One old actor (deep wrinkles), a neutral and a brow raise, at 256² maps: written once.
 const fs::path& TinyScans() {
   static const fs::path dir = [] {
-    // One folder per process: ctest runs the cases of this file in parallel processes.
-    const fs::path d = fs::path(::testing::TempDir()) / "crease_tests" / ("trainer_tiny_scans_" + std::to_string(getpid()));
-    fs::remove_all(d);
+    const fs::path d = testing::FixtureDir("trainer_tiny_scans");
     ActorOptions ao;
     ao.resolution = 256;
     ao.surface_min_vertices = 1000;
