@@ -78,7 +78,7 @@ FaceBox BoxOfPoints(const MatX2d& points, double scale) {
 
 struct DlibLandmarkSource::Impl {
   DlibLandmarkOptions options;
-  dlib::frontal_face_detector detector = dlib::get_frontal_face_detector();
+  HogFaceDetector detector;
   dlib::shape_predictor predictor;
   MatX2d previous;  // last frame's landmarks (empty after a loss)
   // The detector's box relative to stable landmarks (eye corners and nose), learnt
@@ -102,6 +102,7 @@ void StableFrame(const MatX2d& p, Eigen::Vector2d* anchor, double* size) {
 DlibLandmarkSource::DlibLandmarkSource(const DlibLandmarkOptions& options) : impl_(std::make_unique<Impl>()) {
   options.Check();
   impl_->options = options;
+  impl_->detector = HogFaceDetector(options.upsample, options.detection_threshold);
   if (!std::filesystem::exists(options.model_path)) {
     throw Error(fmt::format("{}: dlib's 68-point landmark model is missing (install the Debian package "
                             "libdlib-data, or set model_path)", options.model_path));
@@ -117,32 +118,44 @@ DlibLandmarkSource::~DlibLandmarkSource() = default;
 
 void DlibLandmarkSource::Reset() { impl_->previous.resize(0, 2); }
 
-std::vector<FaceBox> DlibLandmarkSource::Detect(const cv::Mat& image) const {
+struct HogFaceDetector::Impl {
+  int upsample = 0;
+  double threshold = 0.0;
+  mutable dlib::frontal_face_detector detector = dlib::get_frontal_face_detector();
+};
+
+HogFaceDetector::HogFaceDetector(int upsample, double threshold) : impl_(std::make_unique<Impl>()) {
+  impl_->upsample = upsample;
+  impl_->threshold = threshold;
+}
+HogFaceDetector::~HogFaceDetector() = default;
+HogFaceDetector::HogFaceDetector(HogFaceDetector&&) noexcept = default;
+HogFaceDetector& HogFaceDetector::operator=(HogFaceDetector&&) noexcept = default;
+
+std::vector<FaceBox> HogFaceDetector::Detect(const cv::Mat& image) const {
   const cv::Mat gray = ToGray8(image);
-  dlib::cv_image<unsigned char> img(gray);
   std::vector<dlib::rect_detection> dets;
-  // pyramid_up via the detector's own upsampling is not exposed for cv_image; scale instead.
-  if (impl_->options.upsample > 0) {
+  // dlib's pyramid_up is not exposed for cv_image: scale the image instead.
+  double s = 1.0;
+  if (impl_->upsample > 0) {
     cv::Mat up;
-    const double s = std::pow(2.0, impl_->options.upsample);
+    s = std::pow(2.0, impl_->upsample);
     cv::resize(gray, up, cv::Size(), s, s, cv::INTER_LINEAR);
-    dlib::cv_image<unsigned char> up_img(up);
-    impl_->detector(up_img, dets, impl_->options.detection_threshold);
-    for (auto& d : dets) {
-      d.rect = dlib::rectangle(static_cast<long>(d.rect.left() / s), static_cast<long>(d.rect.top() / s),
-                               static_cast<long>(d.rect.right() / s), static_cast<long>(d.rect.bottom() / s));
-    }
+    dlib::cv_image<unsigned char> img(up);
+    impl_->detector(img, dets, impl_->threshold);
   } else {
-    impl_->detector(img, dets, impl_->options.detection_threshold);
+    dlib::cv_image<unsigned char> img(gray);
+    impl_->detector(img, dets, impl_->threshold);
   }
   std::sort(dets.begin(), dets.end(), [](const auto& a, const auto& b) { return a.detection_confidence > b.detection_confidence; });
   std::vector<FaceBox> out;
   for (const auto& d : dets) {
-    out.push_back({static_cast<double>(d.rect.left()), static_cast<double>(d.rect.top()),
-                   static_cast<double>(d.rect.width()), static_cast<double>(d.rect.height()), d.detection_confidence});
+    out.push_back({d.rect.left() / s, d.rect.top() / s, d.rect.width() / s, d.rect.height() / s, d.detection_confidence});
   }
   return out;
 }
+
+std::vector<FaceBox> DlibLandmarkSource::Detect(const cv::Mat& image) const { return impl_->detector.Detect(image); }
 
 MatX2d DlibLandmarkSource::Landmarks(const cv::Mat& image, const FaceBox& box) const {
   const cv::Mat gray = ToGray8(image);

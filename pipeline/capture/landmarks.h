@@ -39,6 +39,24 @@ class LandmarkSource {
   virtual std::string name() const = 0;
 };
 
+// dlib's HOG frontal face detector (Dalal–Triggs features, no model file): the
+// detection both landmark sources run at the start and after a loss.
+class HogFaceDetector {
+ public:
+  // `upsample`: image doublings before detecting (1 finds faces down to ~40 px);
+  // `threshold`: SVM score threshold.
+  explicit HogFaceDetector(int upsample = 0, double threshold = 0.0);
+  ~HogFaceDetector();
+  HogFaceDetector(HogFaceDetector&&) noexcept;
+  HogFaceDetector& operator=(HogFaceDetector&&) noexcept;
+  // All faces in the image (linear float or 8-bit, RGB or gray), best first.
+  std::vector<FaceBox> Detect(const cv::Mat& image) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 struct DlibLandmarkOptions {
   // dlib's 68-point model (Debian package libdlib-data; trained on iBUG 300-W, whose
   // terms exclude commercial use).

@@ -12,8 +12,6 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
-#include <dlib/image_processing/frontal_face_detector.h>
-#include <dlib/opencv/cv_image.h>
 
 #include "core/array_file.h"
 #include "core/color.h"
@@ -587,35 +585,11 @@ void RegressorLandmarkOptions::Check() const {
 struct RegressorLandmarkSource::Impl {
   ShapeRegressor regressor;
   RegressorLandmarkOptions options;
-  dlib::frontal_face_detector detector = dlib::get_frontal_face_detector();
+  HogFaceDetector detector;  // shared with DlibLandmarkSource (landmarks.h), no 68-point model needed
   MatX2d previous;  // last frame's landmarks (empty after a loss)
   int left_eye = 36, right_eye = 45;
 
-  // dlib's HOG detector, best face first (the logic of DlibLandmarkSource::Detect,
-  // without loading dlib's 68-point model).
-  std::vector<FaceBox> Detect(const cv::Mat& image) {
-    const cv::Mat gray = ToGray8(image);
-    std::vector<dlib::rect_detection> dets;
-    double s = 1.0;
-    if (options.upsample > 0) {
-      cv::Mat up;
-      s = std::pow(2.0, options.upsample);
-      cv::resize(gray, up, cv::Size(), s, s, cv::INTER_LINEAR);
-      dlib::cv_image<unsigned char> img(up);
-      detector(img, dets, options.detection_threshold);
-    } else {
-      dlib::cv_image<unsigned char> img(gray);
-      detector(img, dets, options.detection_threshold);
-    }
-    std::sort(dets.begin(), dets.end(),
-              [](const auto& a, const auto& b) { return a.detection_confidence > b.detection_confidence; });
-    std::vector<FaceBox> out;
-    for (const auto& d : dets) {
-      out.push_back({d.rect.left() / s, d.rect.top() / s, d.rect.width() / s, d.rect.height() / s,
-                     d.detection_confidence});
-    }
-    return out;
-  }
+  std::vector<FaceBox> Detect(const cv::Mat& image) const { return detector.Detect(image); }
 };
 
 RegressorLandmarkSource::RegressorLandmarkSource(ShapeRegressor regressor, const RegressorLandmarkOptions& options)
@@ -623,6 +597,7 @@ RegressorLandmarkSource::RegressorLandmarkSource(ShapeRegressor regressor, const
   options.Check();
   regressor.Check();
   impl_->options = options;
+  impl_->detector = HogFaceDetector(options.upsample, options.detection_threshold);
   impl_->regressor = std::move(regressor);
   EyePair(impl_->regressor.num_landmarks, &impl_->left_eye, &impl_->right_eye);
 }
