@@ -15,30 +15,15 @@
 #include "core/options.h"
 #include "core/rng.h"
 #include "test_util.h"
+#include "wrinkle_test_util.h"
 
 namespace crease {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
 
-WrinkleMapOptions TexelOptions() {
-  WrinkleMapOptions o;
-  o.dog_reference_resolution = 0;
-  o.patch_regions.clear();
-  return o;
-}
-
-cv::Mat LineTexture(int S, double line_deg, double depth = 0.2, double width = 2.0) {
-  const double c = 0.5 * (S - 1), phi = line_deg * kPi / 180.0;
-  const double nx = -std::sin(phi), ny = std::cos(phi);
-  cv::Mat t(S, S, CV_32F);
-  for (int y = 0; y < S; ++y)
-    for (int x = 0; x < S; ++x) {
-      const double d = (x - c) * nx + (y - c) * ny;
-      t.at<float>(y, x) = static_cast<float>(0.5 - depth * std::exp(-d * d / (2 * width * width)));
-    }
-  return t;
-}
+using testing::LineTexture;
+using testing::TexelOptions;
 
 double AngleDiffMod180(double a_deg, double b_deg) {
   const double d = std::fmod(std::abs(a_deg - b_deg), 180.0);
