@@ -32,6 +32,13 @@ FrameTruth ReadFrameTruth(const fs::path& dataset, int frame, int num_vertices) 
     const auto q = c.at("rotation_wxyz").get<std::vector<double>>();
     const auto tr = c.at("translation_mm").get<std::vector<double>>();
     t.cam_from_head = Rigid3d(Eigen::Quaterniond(q[0], q[1], q[2], q[3]), Eigen::Vector3d(tr[0], tr[1], tr[2]));
+    if (j.contains("identity")) {
+      const auto a = j.at("identity").get<std::vector<double>>();
+      t.identity = Eigen::Map<const Eigen::VectorXd>(a.data(), static_cast<Eigen::Index>(a.size()));
+    }
+    if (j.contains("expression")) {
+      for (const auto& [name, w] : j.at("expression").items()) t.expression.emplace_back(name, w.get<double>());
+    }
   } catch (const nlohmann::json::exception& e) {
     throw Error(fmt::format("{}: malformed ground truth: {}", jpath.string(), e.what()));
   }

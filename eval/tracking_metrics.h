@@ -4,6 +4,8 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "core/camera.h"
@@ -18,6 +20,8 @@ struct FrameTruth {
   MatX2d vertices;                     // #V×2 px, every coarse rig vertex
   std::vector<char> vertex_visible;    // #V
   Rigid3d cam_from_head;
+  Eigen::VectorXd identity;                         // rig identity coefficients α
+  std::vector<std::pair<std::string, double>> expression;  // rig expression weights by name
 };
 
 // Reads truth/NNNNNN.json and truth/NNNNNN_vertices.bin; errors name the file.

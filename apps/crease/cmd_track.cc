@@ -9,7 +9,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "apps/crease/commands.h"
-#include "core/color.h"
+#include "apps/crease/track_util.h"
 #include "core/error.h"
 #include "core/face_rig.h"
 #include "core/file_util.h"
@@ -26,48 +26,6 @@ namespace crease::app {
 
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-namespace {
-
-json PoseJson(const Rigid3d& p) {
-  const Eigen::Quaterniond& q = p.rotation;
-  return {{"rotation_wxyz", {q.w(), q.x(), q.y(), q.z()}},
-          {"translation_mm", {p.translation.x(), p.translation.y(), p.translation.z()}}};
-}
-
-// The frame with the landmarks (green) and the fitted rig's face wireframe (blue).
-cv::Mat PreviewFrame(const cv::Mat& linear_rgb, const TrackedFrame& t, const MatX2d& projected, const MatX3i& face_F) {
-  cv::Mat bgr(linear_rgb.size(), CV_8UC3);
-  for (int j = 0; j < linear_rgb.rows; ++j) {
-    const cv::Vec3f* p = linear_rgb.ptr<cv::Vec3f>(j);
-    cv::Vec3b* q = bgr.ptr<cv::Vec3b>(j);
-    for (int i = 0; i < linear_rgb.cols; ++i) {
-      for (int c = 0; c < 3; ++c) {
-        q[i][2 - c] = static_cast<uint8_t>(std::clamp(255.0 * LinearToSrgb(std::clamp(p[i][c], 0.0f, 1.0f)) + 0.5, 0.0, 255.0));
-      }
-    }
-  }
-  if (t.tracked && projected.rows() > 0) {
-    // The fitted rig's face as a faint wireframe (every 4th triangle, 35 % opacity).
-    cv::Mat wire = bgr.clone();
-    for (int f = 0; f < face_F.rows(); f += 4) {
-      for (int k = 0; k < 3; ++k) {
-        const Eigen::Vector2d a = projected.row(face_F(f, k)), b = projected.row(face_F(f, (k + 1) % 3));
-        if (!a.allFinite() || !b.allFinite()) continue;
-        cv::line(wire, cv::Point2d(a.x(), a.y()), cv::Point2d(b.x(), b.y()), cv::Scalar(230, 140, 40), 1, cv::LINE_AA);
-      }
-    }
-    cv::addWeighted(wire, 0.35, bgr, 0.65, 0.0, bgr);
-  }
-  for (int i = 0; i < t.landmarks.rows(); ++i) {
-    cv::circle(bgr, cv::Point2d(t.landmarks(i, 0), t.landmarks(i, 1)), 2, cv::Scalar(60, 220, 60), -1, cv::LINE_AA);
-  }
-  cv::putText(bgr, fmt::format("{} {:.2f}", t.tracked ? "tracked" : "lost", t.confidence), cv::Point(8, 18),
-              cv::FONT_HERSHEY_SIMPLEX, 0.5, t.tracked ? cv::Scalar(60, 220, 60) : cv::Scalar(40, 40, 230), 1, cv::LINE_AA);
-  return bgr;
-}
-
-}  // namespace
 
 void AddTrackCommand(CLI::App& app) {
   auto* cmd = app.add_subcommand("track", "Global face tracker: landmarks and the rig fitted per frame (issue 5)");
@@ -107,48 +65,10 @@ void AddTrackCommand(CLI::App& app) {
       rig_path = (info.path / "rig.crig").string();
     }
     const FaceRig rig = ReadRig(rig_path);
-    CameraIntrinsics K;
-    if (!camera_path.empty()) {
-      K = ReadCamera(camera_path).intrinsics;
-    } else if (info.camera) {
-      K = info.camera->intrinsics;
-    } else {
-      K = CameraIntrinsics::FromFov(fov, info.width, info.height);
-    }
-    Require(K.width == info.width && K.height == info.height,
-            fmt::format("the camera is {}×{} but the frames are {}×{}", K.width, K.height, info.width, info.height));
+    const CameraIntrinsics K = ResolveIntrinsics(camera_path, info, fov);
     Require(!gt_prior || dataset, "--ground-truth-prior needs a crease sequence dataset as input");
-    // The tracker, or the experimental control: the rig fitted to the dataset's
-    // ground-truth landmark projections plus noise (landmark_fit.h).
-    std::unique_ptr<FaceTracker> tracker;
-    std::unique_ptr<GroundTruthPriorFitter> gt_fitter;
-    if (gt_prior) {
-      GroundTruthPriorOptions go;
-      go.gt_prior_noise_px = noise;
-      go.gt_prior_noise_seed = seed;
-      gt_fitter = std::make_unique<GroundTruthPriorFitter>(rig, K, options.fit, go);
-    } else {
-      tracker = std::make_unique<FaceTracker>(rig, K, MakeLandmarkSource(options), options);
-    }
-    const LandmarkRigFitter& fitter = gt_prior ? gt_fitter->fitter() : tracker->fitter();
-    int gt_count = 0;
-    auto track = [&](const cv::Mat& image) {
-      if (!gt_prior) {
-        TrackedFrame t = tracker->Track(image);
-        t.frame = frames->index();
-        return t;
-      }
-      TrackedFrame t;
-      t.frame = frames->index();
-      const auto t0 = std::chrono::steady_clock::now();
-      t.fit = gt_fitter->Fit(ReadFrameTruth(info.path, t.frame, rig.num_vertices()).landmarks);
-      t.fit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-      t.landmarks = gt_fitter->last_landmarks();
-      t.tracked = true;
-      t.detected = gt_count++ == 0;
-      t.confidence = 1.0;
-      return t;
-    };
+    FrameTracker tracker(rig, K, options, gt_prior, noise, seed, dataset ? info.path : fs::path());
+    const LandmarkRigFitter& fitter = tracker.fitter();
 
     const fs::path dir(out);
     fs::create_directories(dir / "frames");
@@ -171,7 +91,7 @@ void AddTrackCommand(CLI::App& app) {
     int err_frames = 0;
     const bool has_truth = dataset && fs::is_directory(info.path / "truth");
     while ((max_frames < 0 || n < max_frames) && frames->Next(&frame)) {
-      const TrackedFrame t = track(frame);
+      const TrackedFrame t = tracker.Track(frame, frames->index());
       ++n;
       tracked += t.tracked;
       detections += t.detected;
@@ -227,14 +147,18 @@ void AddTrackCommand(CLI::App& app) {
         }
       }
       WriteJsonFile(dir / "frames" / fmt::format("{:06d}.json", t.frame), j);
-      if (writer.isOpened()) writer.write(PreviewFrame(frame, t, projected, face_F));
+      if (writer.isOpened()) {
+        cv::Mat bgr = PreviewBgr(frame);
+        DrawTracking(t, projected, face_F, &bgr);
+        writer.write(bgr);
+      }
       progress.Advance();
     }
     progress.Finish();
     Require(n > 0, fmt::format("{}: no frames", input));
     json summary;
     summary["input"] = input;
-    summary["landmark_source"] = gt_prior ? "ground-truth-prior" : landmarks;
+    summary["landmark_source"] = tracker.source_name();
     summary["frames"] = n;
     summary["tracked_frames"] = tracked;
     summary["detections"] = detections;

@@ -6,6 +6,8 @@
 #include <chrono>
 #include <optional>
 
+#include <opencv2/imgproc.hpp>
+
 #include "core/error.h"
 #include "core/mesh_ops.h"
 #include "core/options.h"
@@ -448,6 +450,33 @@ MapComparison CompareMaps(const cv::Mat& extracted, const cv::Mat& reference, co
   const double cov = sxy / n - (sx / n) * (sy / n);
   c.correlation = (vx > 0 && vy > 0) ? cov / std::sqrt(vx * vy) : 0.0;
   return c;
+}
+
+double MmPerTexel(const TriMesh& mesh, int R) {
+  double a3 = 0, auv = 0;
+  for (int f = 0; f < mesh.num_faces(); ++f) {
+    const Eigen::Vector3d p0 = mesh.V.row(mesh.F(f, 0)), p1 = mesh.V.row(mesh.F(f, 1)), p2 = mesh.V.row(mesh.F(f, 2));
+    const Eigen::Vector2d u0 = mesh.UV.row(mesh.F(f, 0)), u1 = mesh.UV.row(mesh.F(f, 1)), u2 = mesh.UV.row(mesh.F(f, 2));
+    a3 += 0.5 * (p1 - p0).cross(p2 - p0).norm();
+    auv += 0.5 * std::abs((u1 - u0).x() * (u2 - u0).y() - (u1 - u0).y() * (u2 - u0).x());
+  }
+  return auv > 0 ? std::sqrt(a3 / auv) / R : 0.0;
+}
+
+cv::Mat WrinkleBand(const cv::Mat& d, const cv::Mat& mask, double sigma_texels) {
+  cv::Mat m, dm, bd, bm;
+  mask.convertTo(m, CV_32F, 1.0 / 255.0);
+  cv::multiply(d, m, dm);
+  cv::GaussianBlur(dm, bd, cv::Size(0, 0), sigma_texels);
+  cv::GaussianBlur(m, bm, cv::Size(0, 0), sigma_texels);
+  cv::Mat out = d.clone();
+  for (int j = 0; j < d.rows; ++j) {
+    for (int i = 0; i < d.cols; ++i) {
+      const float w = bm.at<float>(j, i);
+      out.at<float>(j, i) = w > 1e-6f ? d.at<float>(j, i) - bd.at<float>(j, i) / w : 0.0f;
+    }
+  }
+  return out;
 }
 
 }  // namespace crease

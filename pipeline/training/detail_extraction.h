@@ -151,4 +151,16 @@ struct MapComparison {
 };
 MapComparison CompareMaps(const cv::Mat& extracted, const cv::Mat& reference, const cv::Mat& mask);
 
+// Millimetres per texel of an R×R map of the mesh's UV chart (mean scale: the
+// square root of 3D area over UV area, divided by R).
+double MmPerTexel(const TriMesh& mesh, int R);
+
+// The wrinkle band of a displacement map: the map minus its Gaussian blur of σ
+// texels, the blur a normalised convolution inside `mask` (CV_8U) so the chart
+// boundary does not leak in; 0 where the blurred mask vanishes. Removes the broad
+// medium-frequency expression shape a regressed or extracted D legitimately holds
+// (the part of the coarse expression the compatible rig gives up, Sec. 4.1) but a
+// wrinkle-layer ground truth does not.
+cv::Mat WrinkleBand(const cv::Mat& d, const cv::Mat& mask, double sigma_texels);
+
 }  // namespace crease

@@ -104,36 +104,6 @@ cv::Mat ResizeMask(const cv::Mat& mask, int size) {
   return out;
 }
 
-// Millimetres per texel of an R×R map of the mesh's UV chart (mean scale).
-double MmPerTexel(const TriMesh& mesh, int R) {
-  double a3 = 0, auv = 0;
-  for (int f = 0; f < mesh.num_faces(); ++f) {
-    const Eigen::Vector3d p0 = mesh.V.row(mesh.F(f, 0)), p1 = mesh.V.row(mesh.F(f, 1)), p2 = mesh.V.row(mesh.F(f, 2));
-    const Eigen::Vector2d u0 = mesh.UV.row(mesh.F(f, 0)), u1 = mesh.UV.row(mesh.F(f, 1)), u2 = mesh.UV.row(mesh.F(f, 2));
-    a3 += 0.5 * (p1 - p0).cross(p2 - p0).norm();
-    auv += 0.5 * std::abs((u1 - u0).x() * (u2 - u0).y() - (u1 - u0).y() * (u2 - u0).x());
-  }
-  return auv > 0 ? std::sqrt(a3 / auv) / R : 0.0;
-}
-
-// The map minus its Gaussian blur (σ texels), blurred as a normalised convolution
-// inside `mask` so the chart boundary does not leak in.
-cv::Mat WrinkleBand(const cv::Mat& d, const cv::Mat& mask, double sigma_texels) {
-  cv::Mat m, dm, bd, bm;
-  mask.convertTo(m, CV_32F, 1.0 / 255.0);
-  cv::multiply(d, m, dm);
-  cv::GaussianBlur(dm, bd, cv::Size(0, 0), sigma_texels);
-  cv::GaussianBlur(m, bm, cv::Size(0, 0), sigma_texels);
-  cv::Mat out = d.clone();
-  for (int j = 0; j < d.rows; ++j) {
-    for (int i = 0; i < d.cols; ++i) {
-      const float w = bm.at<float>(j, i);
-      out.at<float>(j, i) = w > 1e-6f ? d.at<float>(j, i) - bd.at<float>(j, i) / w : 0.0f;
-    }
-  }
-  return out;
-}
-
 // A ground-truth displacement map (first channel), checked against the map size.
 cv::Mat ReadTruth(const fs::path& path, int R) {
   cv::Mat truth = ReadImage(path);

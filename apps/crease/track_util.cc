@@ -1,0 +1,110 @@
+#include "apps/crease/track_util.h"
+
+#include <algorithm>
+#include <chrono>
+
+#include <fmt/format.h>
+#include <opencv2/imgproc.hpp>
+
+#include "core/color.h"
+#include "core/error.h"
+#include "eval/tracking_metrics.h"
+
+namespace crease::app {
+
+CameraIntrinsics ResolveIntrinsics(const std::string& camera_path, const FrameSourceInfo& info, double fov_deg) {
+  CameraIntrinsics K;
+  if (!camera_path.empty()) {
+    K = ReadCamera(camera_path).intrinsics;
+  } else if (info.camera) {
+    K = info.camera->intrinsics;
+  } else {
+    K = CameraIntrinsics::FromFov(fov_deg, info.width, info.height);
+  }
+  Require(K.width == info.width && K.height == info.height,
+          fmt::format("the camera is {}×{} but the frames are {}×{}", K.width, K.height, info.width, info.height));
+  return K;
+}
+
+FrameTracker::FrameTracker(const FaceRig& rig, const CameraIntrinsics& intrinsics, const TrackerOptions& options,
+                           bool ground_truth_prior, double noise_px, uint64_t seed,
+                           const std::filesystem::path& dataset)
+    : rig_(rig), dataset_(dataset) {
+  if (ground_truth_prior) {
+    Require(!dataset.empty(), "--ground-truth-prior needs a crease sequence dataset as input");
+    GroundTruthPriorOptions go;
+    go.gt_prior_noise_px = noise_px;
+    go.gt_prior_noise_seed = seed;
+    gt_ = std::make_unique<GroundTruthPriorFitter>(rig, intrinsics, options.fit, go);
+    source_ = "ground-truth-prior";
+  } else {
+    tracker_ = std::make_unique<FaceTracker>(rig, intrinsics, MakeLandmarkSource(options), options);
+    source_ = options.landmark_source;
+  }
+}
+
+TrackedFrame FrameTracker::Track(const cv::Mat& image, int index) {
+  if (tracker_) {
+    TrackedFrame t = tracker_->Track(image);
+    t.frame = index;
+    return t;
+  }
+  TrackedFrame t;
+  t.frame = index;
+  const auto t0 = std::chrono::steady_clock::now();
+  t.fit = gt_->Fit(ReadFrameTruth(dataset_, index, rig_.num_vertices()).landmarks);
+  t.fit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  t.landmarks = gt_->last_landmarks();
+  t.tracked = true;
+  t.detected = gt_count_++ == 0;
+  t.confidence = 1.0;
+  return t;
+}
+
+const LandmarkRigFitter& FrameTracker::fitter() const { return tracker_ ? tracker_->fitter() : gt_->fitter(); }
+
+std::string FrameTracker::source_name() const { return source_; }
+
+nlohmann::json PoseJson(const Rigid3d& p) {
+  const Eigen::Quaterniond& q = p.rotation;
+  return {{"rotation_wxyz", {q.w(), q.x(), q.y(), q.z()}},
+          {"translation_mm", {p.translation.x(), p.translation.y(), p.translation.z()}}};
+}
+
+cv::Mat PreviewBgr(const cv::Mat& linear_rgb) {
+  cv::Mat bgr(linear_rgb.size(), CV_8UC3);
+  for (int j = 0; j < linear_rgb.rows; ++j) {
+    const cv::Vec3f* p = linear_rgb.ptr<cv::Vec3f>(j);
+    cv::Vec3b* q = bgr.ptr<cv::Vec3b>(j);
+    for (int i = 0; i < linear_rgb.cols; ++i) {
+      for (int c = 0; c < 3; ++c) {
+        q[i][2 - c] =
+            static_cast<uint8_t>(std::clamp(255.0 * LinearToSrgb(std::clamp(p[i][c], 0.0f, 1.0f)) + 0.5, 0.0, 255.0));
+      }
+    }
+  }
+  return bgr;
+}
+
+void DrawTracking(const TrackedFrame& t, const MatX2d& projected, const MatX3i& face_F, cv::Mat* bgr) {
+  if (t.tracked && projected.rows() > 0) {
+    // The mesh over the face chart as a faint wireframe (every 4th triangle, 35 % opacity).
+    cv::Mat wire = bgr->clone();
+    for (int f = 0; f < face_F.rows(); f += 4) {
+      for (int k = 0; k < 3; ++k) {
+        const Eigen::Vector2d a = projected.row(face_F(f, k)), b = projected.row(face_F(f, (k + 1) % 3));
+        if (!a.allFinite() || !b.allFinite()) continue;
+        cv::line(wire, cv::Point2d(a.x(), a.y()), cv::Point2d(b.x(), b.y()), cv::Scalar(230, 140, 40), 1, cv::LINE_AA);
+      }
+    }
+    cv::addWeighted(wire, 0.35, *bgr, 0.65, 0.0, *bgr);
+  }
+  for (int i = 0; i < t.landmarks.rows(); ++i) {
+    cv::circle(*bgr, cv::Point2d(t.landmarks(i, 0), t.landmarks(i, 1)), 2, cv::Scalar(60, 220, 60), -1, cv::LINE_AA);
+  }
+  cv::putText(*bgr, fmt::format("{} {:.2f}", t.tracked ? "tracked" : "lost", t.confidence), cv::Point(8, 18),
+              cv::FONT_HERSHEY_SIMPLEX, 0.5, t.tracked ? cv::Scalar(60, 220, 60) : cv::Scalar(40, 40, 230), 1,
+              cv::LINE_AA);
+}
+
+}  // namespace crease::app

@@ -1,0 +1,56 @@
+// Shared by `crease track` and `crease capture`: the global tracker (or the
+// ground-truth-prior control) behind one call, the camera resolution rules, and
+// the preview drawing.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/core/mat.hpp>
+
+#include "core/camera.h"
+#include "core/face_rig.h"
+#include "pipeline/capture/frame_source.h"
+#include "pipeline/capture/landmark_fit.h"
+#include "pipeline/capture/tracker.h"
+
+namespace crease::app {
+
+// The intrinsics of the frames: --camera (a camera JSON), else the dataset's
+// calibration, else a pinhole of `fov_deg` horizontal field of view. Throws Error
+// when they disagree with the frame size.
+CameraIntrinsics ResolveIntrinsics(const std::string& camera_path, const FrameSourceInfo& info, double fov_deg);
+
+// The global tracker of the options, or — the experimental control of issue 5 —
+// the rig fitted to a dataset's ground-truth landmark projections plus noise.
+class FrameTracker {
+ public:
+  // `dataset`: the sequence dataset (needed for the ground-truth prior).
+  FrameTracker(const FaceRig& rig, const CameraIntrinsics& intrinsics, const TrackerOptions& options,
+               bool ground_truth_prior, double noise_px, uint64_t seed, const std::filesystem::path& dataset);
+  // Tracks `image` (linear RGB), frame number `index`.
+  TrackedFrame Track(const cv::Mat& image, int index);
+  const LandmarkRigFitter& fitter() const;
+  std::string source_name() const;
+
+ private:
+  const FaceRig& rig_;
+  std::filesystem::path dataset_;
+  std::string source_;
+  std::unique_ptr<FaceTracker> tracker_;
+  std::unique_ptr<GroundTruthPriorFitter> gt_;
+  int gt_count_ = 0;
+};
+
+nlohmann::json PoseJson(const Rigid3d& pose);
+
+// Linear float RGB → 8-bit sRGB BGR (for previews).
+cv::Mat PreviewBgr(const cv::Mat& linear_rgb);
+// Draws the landmarks (green), a faint wireframe of `projected` (#V×2 px) over the
+// face chart triangles, and the tracking state onto `bgr`.
+void DrawTracking(const TrackedFrame& t, const MatX2d& projected, const MatX3i& face_F, cv::Mat* bgr);
+
+}  // namespace crease::app

@@ -1,0 +1,72 @@
+#include "pipeline/capture/capture_io.h"
+
+#include <vector>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "core/array_file.h"
+#include "core/error.h"
+
+namespace crease {
+
+namespace {
+
+constexpr char kMagic[] = "CREASCFR";
+
+template <int C>
+std::vector<float> ToFloat(const Eigen::Matrix<double, Eigen::Dynamic, C, Eigen::RowMajor>& m) {
+  std::vector<float> out(static_cast<size_t>(m.size()));
+  for (Eigen::Index i = 0; i < m.size(); ++i) out[static_cast<size_t>(i)] = static_cast<float>(m.data()[i]);
+  return out;
+}
+
+template <int C>
+Eigen::Matrix<double, Eigen::Dynamic, C, Eigen::RowMajor> FromFloat(const std::vector<float>& v) {
+  Eigen::Matrix<double, Eigen::Dynamic, C, Eigen::RowMajor> m(static_cast<Eigen::Index>(v.size() / C), C);
+  for (size_t i = 0; i < v.size(); ++i) m.data()[i] = v[i];
+  return m;
+}
+
+}  // namespace
+
+void WriteCaptureFrameArrays(const std::filesystem::path& path, const CaptureFrameArrays& frame) {
+  Require(frame.coarse.rows() == frame.refined.rows(),
+          fmt::format("{}: L^t has {} vertices but L~^t {}", path.string(), frame.coarse.rows(), frame.refined.rows()));
+  nlohmann::json header;
+  header["frame"] = frame.frame;
+  header["tracked"] = frame.tracked;
+  header["num_vertices"] = frame.coarse.rows();
+  ArrayFileWriter writer(header.dump());
+  const std::vector<float> coarse = ToFloat<3>(frame.coarse), refined = ToFloat<3>(frame.refined);
+  const std::vector<float> landmarks = ToFloat<2>(frame.landmarks);
+  writer.Add("coarse", coarse.data(), {frame.coarse.rows(), 3});
+  writer.Add("refined", refined.data(), {frame.refined.rows(), 3});
+  writer.Add("landmarks", landmarks.data(), {frame.landmarks.rows(), 2});
+  writer.Write(path, kMagic, CaptureFrameArrays::kFormatVersion);
+}
+
+CaptureFrameArrays ReadCaptureFrameArrays(const std::filesystem::path& path) {
+  const ArrayFile file = ReadArrayFile(path, kMagic, CaptureFrameArrays::kFormatVersion, "capture frame");
+  const std::string what = path.string();
+  nlohmann::json header;
+  try {
+    header = nlohmann::json::parse(file.header_json);
+  } catch (const std::exception& e) {
+    throw Error(fmt::format("{}: malformed header ({})", what, e.what()));
+  }
+  Require(header.contains("frame") && header.contains("tracked") && header.contains("num_vertices"),
+          fmt::format("{}: header lacks frame, tracked or num_vertices", what));
+  CaptureFrameArrays out;
+  out.frame = header["frame"].get<int>();
+  out.tracked = header["tracked"].get<bool>();
+  const int64_t n = header["num_vertices"].get<int64_t>();
+  out.coarse = FromFloat<3>(file.Get<float>("coarse", 3 * n, what));
+  out.refined = FromFloat<3>(file.Get<float>("refined", 3 * n, what));
+  const std::vector<float> lm = file.Get<float>("landmarks", -1, what);
+  Require(lm.size() % 2 == 0, fmt::format("{}: landmarks array has an odd size", what));
+  out.landmarks = FromFloat<2>(lm);
+  return out;
+}
+
+}  // namespace crease
