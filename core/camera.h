@@ -6,6 +6,7 @@
 #pragma once
 
 #include <filesystem>
+#include <Eigen/Geometry>
 #include <nlohmann/json_fwd.hpp>
 
 #include "core/types.h"
@@ -29,6 +30,20 @@ struct Rigid3d {
   }
   Eigen::Matrix<double, 3, 4> ToMatrix() const;
 };
+
+// [v]×: the cross-product matrix, [v]× x = v × x.
+inline Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d m;
+  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return m;
+}
+
+// exp([ω]×): the rotation by the angle-axis vector ω (radians).
+inline Eigen::Matrix3d ExpSO3(const Eigen::Vector3d& w) {
+  const double theta = w.norm();
+  if (theta < 1e-12) return Eigen::Matrix3d::Identity() + Skew(w);
+  return Eigen::AngleAxisd(theta, w / theta).toRotationMatrix();
+}
 
 struct CameraIntrinsics {
   double fx = 0.0, fy = 0.0;  // focal lengths, pixels

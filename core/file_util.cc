@@ -95,4 +95,26 @@ std::string LowerExtension(const fs::path& path) {
   return ext;
 }
 
+void WriteFolderAtomic(const fs::path& out, bool overwrite, const std::function<void(const fs::path&)>& fill) {
+  std::error_code ec;
+  if (fs::exists(out, ec) && !overwrite) {
+    throw Error(fmt::format("{}: already exists (choose another --out, or pass --overwrite)", out.string()));
+  }
+  const fs::path parent = out.has_parent_path() ? out.parent_path() : fs::path(".");
+  fs::create_directories(parent, ec);
+  const fs::path tmp = parent / fmt::format(".{}.tmp-{}", out.filename().string(), ::getpid());
+  fs::remove_all(tmp, ec);
+  fs::create_directories(tmp, ec);
+  if (ec) throw Error(fmt::format("{}: cannot create folder: {}", tmp.string(), ec.message()));
+  try {
+    fill(tmp);
+  } catch (...) {
+    fs::remove_all(tmp, ec);
+    throw;
+  }
+  if (fs::exists(out)) fs::remove_all(out);
+  fs::rename(tmp, out, ec);
+  if (ec) throw Error(fmt::format("{}: cannot move the finished folder into place: {}", out.string(), ec.message()));
+}
+
 }  // namespace crease

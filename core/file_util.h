@@ -32,4 +32,11 @@ void RequireReadableFile(const std::filesystem::path& path);
 // Lower-case extension including the dot (".ply"), "" when none.
 std::string LowerExtension(const std::filesystem::path& path);
 
+// Writes a folder: `fill(tmp)` fills a temporary folder next to `out`, which is
+// then renamed to `out`. An existing `out` is an Error unless `overwrite` (then it
+// is replaced only once `fill` succeeded). If `fill` throws, the temporary folder
+// is removed and `out` is left as it was.
+void WriteFolderAtomic(const std::filesystem::path& out, bool overwrite,
+                       const std::function<void(const std::filesystem::path&)>& fill);
+
 }  // namespace crease

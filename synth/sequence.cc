@@ -165,7 +165,7 @@ void Pulse(PresetBuilder& b, double t0, double t1, double ramp,
 }  // namespace
 
 std::vector<std::string> SequencePresetNames() {
-  return {"wrinkle-workout", "talking", "moving-light", "fast-motion", "occlusion"};
+  return {"wrinkle-workout", "talking", "moving-light", "fast-motion", "occlusion", "workout-talking"};
 }
 
 Sequence MakePresetSequence(const std::string& preset, double seconds) {
@@ -204,6 +204,35 @@ Sequence MakePresetSequence(const std::string& preset, double seconds) {
                 {"pose:roll_deg", rng.Uniform(-3, 3)}});
     }
     return b.Done(d);
+  }
+  if (preset == "workout-talking") {
+    // What a new user does in front of the capture system (Sec. 5.2): a short
+    // wrinkle workout (its frames build the wrinkle map), then talking. 4/7 of the
+    // length is the workout, 0.5 s a transition, the rest talking.
+    const double d = seconds > 0 ? seconds : 7.0;
+    const double dw = d * 4.0 / 7.0, gap = 0.5, dt = std::max(d - dw - gap, 1.0);
+    const Sequence w = MakePresetSequence("wrinkle-workout", dw), t = MakePresetSequence("talking", dt);
+    b.s.keys = w.keys;
+    b.s.interpolation = "smooth";
+    // Every channel is keyed at the end of the workout (its last value there, 0 if
+    // the workout does not use it) so that talking's channels do not leak back.
+    std::map<std::string, double> last;
+    for (const Keyframe& k : w.keys)
+      for (const auto& [c, v] : k.values) last[c] = v;
+    Keyframe junction{w.duration_s, {}};
+    for (const Keyframe& k : t.keys)
+      for (const auto& [c, v] : k.values) junction.values[c] = last.count(c) ? last[c] : 0.0;
+    for (const auto& [c, v] : last) junction.values[c] = v;
+    if (!b.s.keys.empty() && std::abs(b.s.keys.back().t - junction.t) < 1e-9) {
+      for (const auto& [c, v] : junction.values) b.s.keys.back().values.emplace(c, v);
+    } else {
+      b.s.keys.push_back(junction);
+    }
+    for (Keyframe k : t.keys) {
+      k.t += w.duration_s + gap;
+      b.s.keys.push_back(k);
+    }
+    return b.Done(w.duration_s + gap + t.duration_s);
   }
   if (preset == "moving-light") {
     // Fig. 14: the expression holds while a directional light moves from the front to above.

@@ -41,6 +41,23 @@ TEST(Sequence, PresetsAreValidAndDoWhatTheySay) {
   EXPECT_TRUE(o.Frame(0).has_occluder);
   EXPECT_GT(o.Frame(0).occluder_x_mm, 0);
   EXPECT_LT(o.Frame(o.num_frames() - 1).occluder_x_mm, 0);
+  // workout-talking: the workout's brow raise first (talking's jaw not leaking back
+  // before the junction), talking afterwards.
+  const Sequence wt = MakePresetSequence("workout-talking", 7.0);
+  EXPECT_NEAR(wt.duration_s, 7.0, 1e-9);
+  double brow = 0, jaw_early = 0, jaw_late = 0;
+  for (int i = 0; i < wt.num_frames(); ++i) {
+    const SequenceFrame f = wt.Frame(i);
+    auto get = [&](const char* c) { return f.expression.count(c) ? f.expression.at(c) : 0.0; };
+    if (f.time_s < 1.2) {
+      brow = std::max(brow, get("browInnerUp"));
+      jaw_early = std::max(jaw_early, get("jawOpen"));
+    }
+    if (f.time_s > 4.6) jaw_late = std::max(jaw_late, get("jawOpen"));
+  }
+  EXPECT_EQ(brow, 1.0);
+  EXPECT_EQ(jaw_early, 0.0);
+  EXPECT_GT(jaw_late, 0.05);
   // Same preset, same values: presets are deterministic.
   EXPECT_EQ(MakePresetSequence("talking").Frame(37).expression, MakePresetSequence("talking").Frame(37).expression);
   EXPECT_NE(ErrorOf([] { MakePresetSequence("dancing"); }).find("unknown sequence preset 'dancing'"),

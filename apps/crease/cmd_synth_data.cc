@@ -146,7 +146,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_option("--rig", rig_path, "Rig (.crig)")->required();
     cmd->add_option("--actor", actor_file, "Actor definition (.json)");
     cmd->add_option("--actor-seed", actor_seed, "Actor seed when no --actor is given")->capture_default_str();
-    auto* p = cmd->add_option("--preset", preset, "Built-in sequence: wrinkle-workout, talking, moving-light, fast-motion, occlusion");
+    auto* p = cmd->add_option("--preset", preset, "Built-in sequence: wrinkle-workout, talking, moving-light, fast-motion, occlusion, workout-talking");
     auto* s = cmd->add_option("--script", script, "Sequence YAML (see synth/sequence.h)");
     p->excludes(s);
     cmd->add_option("--seconds", seconds, "Preset length in seconds (default: the preset's own)");

@@ -24,6 +24,8 @@ void AddSynthDatasetCommands(CLI::App& app);
 void AddTrainCommands(CLI::App& app);
 // track (issue 5: the global face tracker).
 void AddTrackCommand(CLI::App& app);
-void AddTrainTrackerCommand(CLI::App& app);  // train-tracker (issue 5: the landmark regressor)
+void AddTrainTrackerCommand(CLI::App& app);
+// capture (Sec. 5: online capture) and eval (its metrics against ground truth), issue 6.
+void AddCaptureCommands(CLI::App& app);  // train-tracker (issue 5: the landmark regressor)
 
 }  // namespace crease::app

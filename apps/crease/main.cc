@@ -20,6 +20,7 @@ int main(int argc, char** argv) {
   crease::app::AddTrainCommands(app);
   crease::app::AddTrackCommand(app);
   crease::app::AddTrainTrackerCommand(app);
+  crease::app::AddCaptureCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -65,19 +65,6 @@ namespace {
 
 constexpr int kMinPoints = 6;
 
-Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d m;
-  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-  return m;
-}
-
-// exp([ω]×).
-Eigen::Matrix3d ExpSO3(const Eigen::Vector3d& w) {
-  const double theta = w.norm();
-  if (theta < 1e-12) return Eigen::Matrix3d::Identity() + Skew(w);
-  return Eigen::AngleAxisd(theta, w / theta).toRotationMatrix();
-}
-
 // log(R) as an angle-axis vector.
 Eigen::Vector3d LogSO3(const Eigen::Matrix3d& R) {
   const Eigen::AngleAxisd aa(R);

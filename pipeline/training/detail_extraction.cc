@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 #include <array>
 #include <chrono>
+#include <limits>
 #include <optional>
 
 #include <opencv2/imgproc.hpp>
@@ -417,14 +418,12 @@ FaceRig MakeRigCompatible(const FaceRig& rig, const DetailExtractionOptions& opt
   return out;
 }
 
-MapComparison CompareMaps(const cv::Mat& extracted, const cv::Mat& reference, const cv::Mat& mask) {
+void MapMoments::Add(const cv::Mat& extracted, const cv::Mat& reference, const cv::Mat& mask) {
   Require(extracted.type() == CV_32F && reference.type() == CV_32F && mask.type() == CV_8U,
           "CompareMaps: expected CV_32F maps and a CV_8U mask");
   Require(extracted.size() == reference.size() && extracted.size() == mask.size(),
           fmt::format("CompareMaps: sizes differ ({}×{}, {}×{}, mask {}×{})", extracted.cols, extracted.rows,
                       reference.cols, reference.rows, mask.cols, mask.rows));
-  double sx = 0, sy = 0, sxx = 0, syy = 0, sxy = 0, se = 0;
-  int n = 0;
   for (int j = 0; j < extracted.rows; ++j) {
     const float* x = extracted.ptr<float>(j);
     const float* y = reference.ptr<float>(j);
@@ -440,16 +439,26 @@ MapComparison CompareMaps(const cv::Mat& extracted, const cv::Mat& reference, co
       ++n;
     }
   }
+}
+
+MapComparison MapMoments::Result() const {
   MapComparison c;
-  c.texels = n;
+  c.texels = static_cast<int>(std::min<int64_t>(n, std::numeric_limits<int>::max()));
   if (n == 0) return c;
-  c.rmse_mm = std::sqrt(se / n);
-  c.reference_rms_mm = std::sqrt(syy / n);
-  c.extracted_rms_mm = std::sqrt(sxx / n);
-  const double vx = sxx / n - (sx / n) * (sx / n), vy = syy / n - (sy / n) * (sy / n);
-  const double cov = sxy / n - (sx / n) * (sy / n);
+  const double m = static_cast<double>(n);
+  c.rmse_mm = std::sqrt(se / m);
+  c.reference_rms_mm = std::sqrt(syy / m);
+  c.extracted_rms_mm = std::sqrt(sxx / m);
+  const double vx = sxx / m - (sx / m) * (sx / m), vy = syy / m - (sy / m) * (sy / m);
+  const double cov = sxy / m - (sx / m) * (sy / m);
   c.correlation = (vx > 0 && vy > 0) ? cov / std::sqrt(vx * vy) : 0.0;
   return c;
+}
+
+MapComparison CompareMaps(const cv::Mat& extracted, const cv::Mat& reference, const cv::Mat& mask) {
+  MapMoments m;
+  m.Add(extracted, reference, mask);
+  return m.Result();
 }
 
 double MmPerTexel(const TriMesh& mesh, int R) {

@@ -47,6 +47,7 @@
 #include <string>
 #include <vector>
 
+#include <cstdint>
 #include <opencv2/core/mat.hpp>
 
 #include "core/face_rig.h"
@@ -150,6 +151,15 @@ struct MapComparison {
   double extracted_rms_mm = 0.0;
 };
 MapComparison CompareMaps(const cv::Mat& extracted, const cv::Mat& reference, const cv::Mat& mask);
+
+// The sums behind CompareMaps, to pool texels over several maps (e.g. all frames
+// of a sequence): Add() each (extracted, reference, mask), then Result().
+struct MapMoments {
+  int64_t n = 0;
+  double sx = 0, sy = 0, sxx = 0, syy = 0, sxy = 0, se = 0;
+  void Add(const cv::Mat& extracted, const cv::Mat& reference, const cv::Mat& mask);
+  MapComparison Result() const;
+};
 
 // Millimetres per texel of an R×R map of the mesh's UV chart (mean scale: the
 // square root of 3D area over UV area, divided by R).

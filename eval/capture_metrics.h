@@ -1,0 +1,114 @@
+// Core metrics of online capture against the studio's ground truth (issue 6,
+// `crease eval --capture DIR --dataset DIR`):
+//
+//   tracking (Fig. 11)   2D error of the projected vertices of L^t and of L~^t
+//                        (mean over the visible face-chart vertices, px), their
+//                        3D vertex error in the camera frame (mm) raw and after a
+//                        rigid alignment to the truth (Kabsch), and the jitter:
+//                        the change of the 2D error vector from one frame to the
+//                        next (px), which is 0 for a constant bias and grows with
+//                        temporal instability;
+//   displacement D^t     against the studio's medium-scale expression displacement
+//                        (the quantity the paper regresses): RMSE, Pearson
+//                        correlation and amplitude ratio (RMS of D^t / RMS of the
+//                        truth), over the face and over the wrinkle regions, raw
+//                        and in the wrinkle band (both maps minus their Gaussian
+//                        blur of band_mm, as training validates: D^t also carries
+//                        the broad shape the compatible rig gives up, Sec. 4.1),
+//                        and its jitter (RMS of the frame-to-frame change of the
+//                        band error);
+//   surface H^t          every surface_every-th frame: H^t, rigidly aligned to the
+//                        true coarse mesh through L~^t's face vertices (so pose and
+//                        depth errors of the monocular tracker do not swamp the
+//                        detail), against the true high-resolution surface rebuilt
+//                        from the dataset's actor: distance along H^t's normal (mm)
+//                        and the angle between H^t's normal and the true surface's
+//                        normal (degrees), for three layers — L~^t alone, L~^t +
+//                        D^HF, and the full H^t = L~^t + D^t + D^HF;
+//   speed                per-stage times and frames per second from the capture.
+//
+// Results: eval.json (summary and per-frame), eval_frames.csv, eval.md.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "pipeline/training/detail_extraction.h"
+
+namespace crease {
+
+class OptionVisitor;
+
+struct CaptureEvalOptions {
+  // Surface metrics of H^t on every this-many-th tracked frame (rebuilding the
+  // true high-resolution surface costs ~0.3 s per frame). 0 = none.
+  int surface_every = 5;
+  // σ of the wrinkle band, mm on the face (as TrainingOptions::validation_band_mm).
+  double band_mm = 2.0;
+  // The regions of the wrinkle metrics (rig region masks).
+  std::vector<std::string> wrinkle_regions = {"forehead", "glabella", "left_eye", "right_eye", "left_cheek",
+                                              "right_cheek"};
+  // Rays from H^t farther than this from the true surface count as misses, mm.
+  double surface_max_distance_mm = 5.0;
+  // Resolution of the H^t grid rebuilt for the surface metrics (hifi_mesh_resolution).
+  int surface_mesh_resolution = 256;
+  int max_frames = -1;  // evaluate at most this many frames (−1 = all)
+  // A frame counts as active for the pooled displacement metrics when the true
+  // wrinkle-band RMS over the wrinkle regions reaches this, mm.
+  double active_reference_rms_mm = 0.005;
+
+  void VisitFields(OptionVisitor& v);
+  void Check() const;
+};
+
+struct SurfaceError {
+  int samples = 0;          // H^t vertices whose normal ray hit the true surface
+  double distance_mm = 0;   // mean |distance|
+  double distance_rms_mm = 0;
+  double normal_deg = 0;    // mean angle between the normals
+};
+
+struct FrameCaptureEval {
+  int frame = 0;
+  bool tracked = false;
+  int visible_vertices = 0;
+  double coarse_px = 0, refined_px = 0;          // 2D vertex error, L^t and L~^t
+  double coarse_mm = 0, refined_mm = 0;          // 3D vertex error (camera frame)
+  double coarse_aligned_mm = 0, refined_aligned_mm = 0;  // after rigid alignment
+  double coarse_jitter_px = 0, refined_jitter_px = 0;    // vs the previous frame (0 on the first)
+  bool has_displacement = false;
+  MapComparison d_face, d_wrinkle, d_face_band, d_wrinkle_band;
+  double d_jitter_mm = 0;  // band, wrinkle regions
+  bool has_surface = false;
+  SurfaceError surface_coarse, surface_meso, surface_full;
+};
+
+struct CaptureEvalSummary {
+  std::string capture, dataset;
+  int frames = 0, tracked = 0, displacement_frames = 0, surface_frames = 0;
+  double coarse_px = 0, refined_px = 0, coarse_mm = 0, refined_mm = 0, coarse_aligned_mm = 0, refined_aligned_mm = 0;
+  double coarse_jitter_px = 0, refined_jitter_px = 0;
+  // Displacement, pooled over the texels of the active frames (those whose true
+  // wrinkle-band RMS in the wrinkle regions reaches active_reference_rms_mm: a
+  // correlation or amplitude ratio of a frame without wrinkles means nothing).
+  int active_frames = 0;
+  MapComparison d_face, d_wrinkle, d_wrinkle_band;
+  double d_jitter_mm = 0;  // mean over consecutive frame pairs
+  SurfaceError surface_coarse, surface_meso, surface_full;    // means over surface frames
+  std::string timing_json = "{}";  // copied from the capture's summary
+  double fps = 0, tracking_share = 0, detail_share = 0;
+  std::vector<FrameCaptureEval> per_frame;
+
+  std::string ToMarkdown() const;
+  std::string ToJson() const;
+  std::string ToCsv() const;  // one row per frame
+};
+
+// Evaluates the capture folder `capture` (written by `crease capture`) against the
+// sequence dataset `dataset` (written by `crease synth sequence` with its maps).
+// Throws Error naming the file when either folder lacks what is needed.
+CaptureEvalSummary EvaluateCapture(const std::filesystem::path& capture, const std::filesystem::path& dataset,
+                                   const CaptureEvalOptions& options);
+
+}  // namespace crease

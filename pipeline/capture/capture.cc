@@ -1,0 +1,190 @@
+#include "pipeline/capture/capture.h"
+
+#include <chrono>
+#include <utility>
+
+#include <fmt/format.h>
+#include <opencv2/core.hpp>
+
+#include "core/error.h"
+#include "core/options.h"
+#include "pipeline/capture/landmarks.h"
+#include "pipeline/training/detail_extraction.h"
+
+namespace crease {
+
+namespace {
+
+double MsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// L^t in the camera frame: the rig evaluated with the fit's weights and the
+// tracker's identity, moved by cam_from_head.
+MatX3d CameraVertices(const FaceRig& rig, const Eigen::VectorXd& identity, const LandmarkFrameFit& fit) {
+  MatX3d V = rig.EvaluatePositions(identity, fit.expression);
+  const Eigen::Matrix3d R = fit.cam_from_head.rotation.toRotationMatrix();
+  const Eigen::RowVector3d t = fit.cam_from_head.translation.transpose();
+  for (int i = 0; i < V.rows(); ++i) V.row(i) = V.row(i) * R.transpose() + t;
+  return V;
+}
+
+}  // namespace
+
+void CaptureOptions::VisitFields(OptionVisitor& v) {
+  tracker.VisitFields(v);
+  refinement.VisitFields(v);
+  texture.VisitFields(v);
+  detail.VisitFields(v);
+  mesoscopic.VisitFields(v);
+  hifi.VisitFields(v);
+  v.Field("refine", refine);
+  v.Field("regress_detail", regress_detail);
+  v.Field("mesoscopic_detail", mesoscopic_detail);
+  v.Field("build_hifi_mesh", build_hifi_mesh);
+}
+
+void CaptureOptions::Check() const {
+  tracker.Check();
+  refinement.Check();
+  texture.Check();
+  detail.Check();
+  mesoscopic.Check();
+  hifi.Check();
+}
+
+FaceRig CompatibleRig(const FaceRig& rig, const DetailModel& model) {
+  return MakeRigCompatible(rig, model.detail);
+}
+
+CaptureSession::CaptureSession(const FaceRig& rig, const DetailModel& model, const CameraIntrinsics& intrinsics,
+                               const CaptureOptions& options)
+    : rig_(rig), options_(options), intrinsics_(intrinsics) {
+  options_.Check();
+  intrinsics_.Validate("capture camera");
+  model.Validate("detail model");
+  Require(rig_.neutral.has_uv(), "capture: the rig has no UV chart (texture extraction and detail need one)");
+  map_resolution_ = model.map_resolution;
+  // The texture must be sampled at the model's resolution: the patches and the
+  // DoG of the wrinkle map are defined in its texels (Sec. 4.2).
+  options_.texture.map_resolution = map_resolution_;
+  texture_ = std::make_unique<FrameTextureExtractor>(rig_, intrinsics_, options_.texture);
+  if (options_.refine) refiner_ = std::make_unique<FlowRefiner>(rig_, intrinsics_, options_.refinement);
+  detail_ = std::make_unique<DetailRegressor>(model, rig_.regions, texture_->coverage(), options_.detail);
+  hifi_ = std::make_unique<HifiMeshBuilder>(rig_, options_.hifi);
+}
+
+CaptureSession::~CaptureSession() = default;
+
+bool CaptureSession::layout_fixed() const { return detail_->layout_fixed(); }
+
+std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& frame, const TrackedFrame& tracked,
+                                                   const Eigen::VectorXd& identity) {
+  Require(!frame.empty(), fmt::format("capture: frame {} is empty", index));
+  Require(frame.cols == intrinsics_.width && frame.rows == intrinsics_.height,
+          fmt::format("capture: frame {} is {}×{} but the camera is {}×{}", index, frame.cols, frame.rows,
+                      intrinsics_.width, intrinsics_.height));
+  CapturedFrame out;
+  out.frame = index;
+  out.tracked = tracked;
+  out.timing.landmarks_ms = tracked.landmarks_ms;
+  out.timing.fit_ms = tracked.fit_ms;
+  if (tracked.tracked) {
+    out.coarse = CameraVertices(rig_, identity, tracked.fit);
+    if (refiner_) {
+      auto t0 = std::chrono::steady_clock::now();
+      const std::vector<uint8_t> visible = texture_->VisibleVertices(out.coarse);
+      out.timing.visibility_ms = MsSince(t0);
+      t0 = std::chrono::steady_clock::now();
+      out.refinement = refiner_->Refine(ToGray8(frame), tracked, identity, visible);
+      out.timing.refine_ms = MsSince(t0);
+      out.refined = out.refinement.vertices.rows() == out.coarse.rows() ? out.refinement.vertices : out.coarse;
+    } else {
+      out.refined = out.coarse;
+    }
+    auto t0 = std::chrono::steady_clock::now();
+    out.texture = texture_->Extract(out.refined, frame);
+    out.timing.texture_ms = MsSince(t0);
+    out.has_mesh = true;
+    if (mesoscopic_.empty()) {
+      t0 = std::chrono::steady_clock::now();
+      if (options_.mesoscopic_detail) {
+        mesoscopic_ = MesoscopicMap(out.texture.gray, out.texture.seen, options_.mesoscopic);
+      } else {
+        mesoscopic_ = cv::Mat::zeros(map_resolution_, map_resolution_, CV_32F);
+      }
+      out.timing.mesoscopic_ms = MsSince(t0);
+    }
+  } else if (refiner_) {
+    refiner_->Reset();
+  }
+
+  std::vector<CapturedFrame> done;
+  if (detail_->layout_fixed()) {
+    RegressAndFinish(&out);
+    done.push_back(std::move(out));
+    return done;
+  }
+  if (out.has_mesh) {
+    const auto t0 = std::chrono::steady_clock::now();
+    detail_->AddWrinkleFrame(out.texture.gray, out.texture.seen);
+    out.timing.detail_ms += MsSince(t0);
+  }
+  pending_.push_back(std::move(out));
+  if (detail_->frames_added() >= options_.detail.wrinkle_frames) done = Flush();
+  return done;
+}
+
+std::vector<CapturedFrame> CaptureSession::Flush() {
+  std::vector<CapturedFrame> done;
+  if (pending_.empty()) return done;
+  if (!detail_->layout_fixed()) {
+    if (detail_->frames_added() == 0) {
+      // No frame was tracked: nothing to build a wrinkle map from. Return the
+      // frames as they are (no mesh, no detail); the layout stays open.
+      while (!pending_.empty()) {
+        done.push_back(std::move(pending_.front()));
+        pending_.pop_front();
+      }
+      return done;
+    }
+    detail_->FixLayout();
+  }
+  while (!pending_.empty()) {
+    CapturedFrame f = std::move(pending_.front());
+    pending_.pop_front();
+    RegressAndFinish(&f);
+    done.push_back(std::move(f));
+  }
+  return done;
+}
+
+void CaptureSession::RegressAndFinish(CapturedFrame* frame) {
+  if (!frame->has_mesh) return;
+  auto t0 = std::chrono::steady_clock::now();
+  if (options_.regress_detail) {
+    frame->displacement = detail_->Regress(frame->texture.gray, frame->texture.seen, &frame->timing.detail);
+  } else {
+    frame->displacement = cv::Mat::zeros(map_resolution_, map_resolution_, CV_32F);
+  }
+  frame->has_detail = true;
+  frame->timing.detail_ms += MsSince(t0);
+  if (options_.build_hifi_mesh) {
+    t0 = std::chrono::steady_clock::now();
+    hifi_->BuildInto(frame->refined, CombinedDisplacement(*frame), &hifi_scratch_);
+    frame->timing.hifi_ms = MsSince(t0);
+  }
+}
+
+cv::Mat CaptureSession::CombinedDisplacement(const CapturedFrame& frame) const {
+  Require(frame.has_mesh, fmt::format("capture: frame {} has no mesh", frame.frame));
+  cv::Mat d = frame.has_detail ? frame.displacement.clone() : cv::Mat::zeros(map_resolution_, map_resolution_, CV_32F);
+  if (!mesoscopic_.empty()) d += mesoscopic_;
+  return d;
+}
+
+TriMesh CaptureSession::HifiMesh(const CapturedFrame& frame) const {
+  return hifi_->Build(frame.refined, CombinedDisplacement(frame));
+}
+
+}  // namespace crease

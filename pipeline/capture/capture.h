@@ -1,0 +1,159 @@
+// Online capture (paper Sec. 5): from the global tracker's coarse mesh L^t to the
+// high-fidelity mesh H^t, one frame at a time.
+//
+//   frame I^t ──► global tracker (tracker.h; done by the caller) ──► L^t, landmarks
+//             ──► visibility of L^t (depth buffer, frame_texture.h)
+//             ──► flow refinement (Sec. 5.1, flow_refinement.h) ──► L~^t
+//             ──► texture T^t in the rig's UV layout (frame_texture.h)
+//             ──► [first frame] mesoscopic map D^HF (Sec. 5.3)
+//             ──► [first N frames] wrinkle map, then the fixed patch layout (Sec. 5.2)
+//             ──► detail regression D^t (Sec. 5.2, detail_regression.h)
+//             ──► H^t = L~^t + (D^t + D^HF) · n (Sec. 5.3, hifi_mesh.h)
+//
+// The wrinkle map needs the textures of the first N frames before any patch can
+// be placed (Sec. 5.2), so CaptureSession buffers those frames (their textures,
+// ~4 MB each at 1024²) and returns them all, with their D^t, once the layout is
+// fixed; from then on every frame is returned as soon as it is processed. A
+// researcher therefore gets D^t for every frame; a live system sees a latency of
+// N frames once, at the start. Flush() fixes the layout early when the input ends
+// before N frames.
+//
+// The rig: detail regression needs the rig made compatible with the training
+// lowpass G (Sec. 4.1, MakeRigCompatible): the displacement maps were extracted
+// relative to it. The session is given that rig (CompatibleRig below); the tracker
+// should track with the same rig so that L^t and H^t share one surface.
+//
+// Differences from the paper:
+//   1. The paper extracts T^t from L~^t on the GPU and renders H^t with hardware
+//      displacement mapping; here both run on the CPU (TBB), and H^t is a dense mesh
+//      on a regular UV grid over the face chart (hifi_mesh.h).
+//   2. The first N frames get their D^t once the layout is fixed (see above); the
+//      paper does not say what is shown during those frames.
+//   3. Frames where the tracker lost the face carry no refinement, texture or detail;
+//      the refinement restarts from the projections of L^t on the next tracked frame.
+#pragma once
+
+#include <deque>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "core/camera.h"
+#include "core/face_rig.h"
+#include "core/tri_mesh.h"
+#include "pipeline/capture/detail_regression.h"
+#include "pipeline/capture/flow_refinement.h"
+#include "pipeline/capture/frame_texture.h"
+#include "pipeline/capture/hifi_mesh.h"
+#include "pipeline/capture/tracker.h"
+#include "pipeline/training/detail_model.h"
+
+namespace crease {
+
+class OptionVisitor;
+
+struct CaptureOptions {
+  TrackerOptions tracker;            // the global tracker (Sec. 5, DDE in the paper)
+  FlowRefinementOptions refinement;  // Sec. 5.1
+  FrameTextureOptions texture;       // Sec. 5.1 (T^t); map_resolution follows the model
+  DetailRegressionOptions detail;    // Sec. 5.2
+  MesoscopicOptions mesoscopic;      // Sec. 5.3
+  HifiMeshOptions hifi;              // Sec. 5.3
+  // Ablation switches (not in the paper): without refinement T^t is extracted from
+  // L^t and H^t built on L^t; without detail D^t = 0; without mesoscopic D^HF = 0.
+  bool refine = true;
+  bool regress_detail = true;
+  bool mesoscopic_detail = true;
+  // Build H^t every frame (into a buffer the session reuses; its time counts in the
+  // per-frame figures, as the paper's GPU displacement mapping does). Either way the
+  // caller gets H^t of any completed frame from HifiMesh().
+  bool build_hifi_mesh = true;
+
+  // All fields of all stages, flattened (keys are unique).
+  void VisitFields(OptionVisitor& v);
+  void Check() const;
+};
+
+// Per-stage wall time of one frame, ms (file I/O excluded).
+struct CaptureTiming {
+  double landmarks_ms = 0, fit_ms = 0;  // the global tracker (copied from TrackedFrame)
+  double visibility_ms = 0, refine_ms = 0, texture_ms = 0, mesoscopic_ms = 0;
+  double detail_ms = 0, hifi_ms = 0;
+  DetailTiming detail;  // its sub-steps
+  double tracking_ms() const { return landmarks_ms + fit_ms + visibility_ms + refine_ms; }
+  double detail_total_ms() const { return texture_ms + mesoscopic_ms + detail_ms + hifi_ms; }
+  double total_ms() const { return tracking_ms() + detail_total_ms(); }
+};
+
+struct CapturedFrame {
+  int frame = 0;
+  TrackedFrame tracked;       // the global tracker's output
+  bool has_mesh = false;      // tracked: L^t, L~^t and T^t are set
+  bool has_detail = false;    // D^t is set (the layout was fixed and the frame tracked)
+  MatX3d coarse;              // L^t, #V×3, camera frame, mm
+  MatX3d refined;             // L~^t, #V×3, camera frame, mm (= L^t without refinement)
+  RefinedFrame refinement;    // flow statistics (empty without refinement)
+  FrameTexture texture;       // T^t and its seen mask
+  cv::Mat displacement;       // D^t, CV_32F R×R, mm
+  CaptureTiming timing;
+};
+
+// The rig made compatible with the model's lowpass G (Sec. 4.1; MakeRigCompatible),
+// the rig capture tracks and displaces. With G = 0 it is `rig` itself.
+FaceRig CompatibleRig(const FaceRig& rig, const DetailModel& model);
+
+class CaptureSession {
+ public:
+  // `rig`: the compatible rig (CompatibleRig); `model`: the trained detail model;
+  // `intrinsics`: the camera of the frames. Precomputes the UV raster, the flow
+  // refinement's geodesics and the mesh stencils. Throws Error when the rig lacks
+  // a UV chart, the model's map size disagrees with the options, or options fail Check().
+  CaptureSession(const FaceRig& rig, const DetailModel& model, const CameraIntrinsics& intrinsics,
+                 const CaptureOptions& options);
+  ~CaptureSession();
+
+  // Processes frame `index` (linear float RGB CV_32FC3, sized like the intrinsics)
+  // with the global tracker's result for it and the tracker's identity α. Returns
+  // the frames completed by this call, in order: nothing while the wrinkle map is
+  // being built (the first N frames), then those N frames at once, then one frame
+  // per call.
+  std::vector<CapturedFrame> Process(int index, const cv::Mat& frame, const TrackedFrame& tracked,
+                                     const Eigen::VectorXd& identity);
+  // Fixes the layout if it is not yet fixed (input shorter than N frames) and
+  // returns the buffered frames.
+  std::vector<CapturedFrame> Flush();
+
+  // H^t of a completed frame (built anew).
+  TriMesh HifiMesh(const CapturedFrame& frame) const;
+  // H^t of the frame completed last (valid when build_hifi_mesh; reused buffer).
+  const TriMesh& last_hifi_mesh() const { return hifi_scratch_; }
+  // The combined map D^t + D^HF of a frame (what displaces H^t).
+  cv::Mat CombinedDisplacement(const CapturedFrame& frame) const;
+
+  bool layout_fixed() const;
+  const DetailRegressor& detail() const { return *detail_; }
+  const cv::Mat& mesoscopic() const { return mesoscopic_; }  // D^HF (empty before the first textured frame)
+  const FrameTextureExtractor& texture_extractor() const { return *texture_; }
+  const FaceRig& rig() const { return rig_; }
+  const CaptureOptions& options() const { return options_; }
+
+ private:
+  void RegressAndFinish(CapturedFrame* frame);
+
+  FaceRig rig_;
+  CaptureOptions options_;
+  CameraIntrinsics intrinsics_;
+  int map_resolution_ = 0;
+  std::unique_ptr<FrameTextureExtractor> texture_;
+  std::unique_ptr<FlowRefiner> refiner_;
+  std::unique_ptr<DetailRegressor> detail_;
+  std::unique_ptr<HifiMeshBuilder> hifi_;
+  cv::Mat mesoscopic_;
+  TriMesh hifi_scratch_;
+  std::deque<CapturedFrame> pending_;  // frames waiting for the layout
+  bool was_tracked_ = false;
+};
+
+}  // namespace crease

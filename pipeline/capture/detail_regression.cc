@@ -1,0 +1,474 @@
+// Online detail regression, paper Sec. 5.2; see detail_regression.h.
+#include "pipeline/capture/detail_regression.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <memory>
+#include <numbers>
+#include <optional>
+
+#include <Eigen/Core>
+#include <fmt/format.h>
+#include <opencv2/imgproc.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "core/error.h"
+#include "core/options.h"
+
+namespace crease {
+
+void DetailRegressionOptions::VisitFields(OptionVisitor& v) {
+  v.Field("wrinkle_frames", wrinkle_frames);
+  v.Field("wrinkle_min_seen_fraction", wrinkle_min_seen_fraction);
+  v.Field("wrinkle_extension_sigma", wrinkle_extension_sigma);
+  v.Field("patch_max_unseen_fraction", patch_max_unseen_fraction);
+  v.Field("gate_by_response", gate_by_response);
+  fill.VisitFields(v);
+}
+
+void DetailRegressionOptions::Check() const {
+  const char* o = "DetailRegressionOptions";
+  CheckGe(o, "wrinkle_frames", wrinkle_frames, 1);
+  CheckGe(o, "wrinkle_min_seen_fraction", wrinkle_min_seen_fraction, 0.0);
+  CheckLe(o, "wrinkle_min_seen_fraction", wrinkle_min_seen_fraction, 1.0);
+  CheckGt(o, "wrinkle_extension_sigma", wrinkle_extension_sigma, 0.0);
+  CheckGe(o, "patch_max_unseen_fraction", patch_max_unseen_fraction, 0.0);
+  CheckLe(o, "patch_max_unseen_fraction", patch_max_unseen_fraction, 1.0);
+  fill.Check();
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double MsSince(Clock::time_point t) { return std::chrono::duration<double, std::milli>(Clock::now() - t).count(); }
+
+// Footprint grid of a patch for the seen check: samples a, b ∈ {0, g, 2g, …, w−1}.
+constexpr int kFootprintGrid = 9;
+
+// 1D Gaussian of σ truncated at 3σ (it is normalised per texel anyway: the gate
+// evaluates normalised convolutions like DogResponse, whose OpenCV kernels reach 4σ;
+// the difference is < 0.3 % of the kernel mass), normalised.
+std::vector<float> GaussianTaps(double sigma) {
+  const int radius = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
+  const cv::Mat k = cv::getGaussianKernel(2 * radius + 1, sigma, CV_32F);
+  return std::vector<float>(k.begin<float>(), k.end<float>());
+}
+
+}  // namespace
+
+struct DetailRegressor::Impl {
+  DetailModel model;
+  DetailRegressionOptions options;
+  int R = 0;
+  cv::Mat coverage;  // CV_8U 255 / 0
+  std::optional<WrinkleMapBuilder> builder;
+  cv::Mat seen_count;  // CV_32S: J_p
+  int frames = 0;
+  // After FixLayout.
+  bool fixed = false;
+  WrinkleMap wmap;
+  PatchLayout layout;
+  PatchLayoutReport layout_report;
+  std::optional<PatchSampler> sampler;
+  std::optional<PoissonFill> fill;
+  std::vector<int32_t> footprint;  // N × kFootprintGrid² texel indices (y·R + x), -1 beyond the map
+  // Share of every patch in the merge: for patch k, entries [share_begin[k],
+  // share_begin[k+1]) give texels t and w_k(t) / Σ_j w_j(t) (its bilinear splat
+  // weight over the total), to renormalise the average when patches drop out.
+  std::vector<int64_t> share_begin;
+  std::vector<int32_t> share_texel;
+  std::vector<float> share_value;
+  std::vector<float> taps_small, taps_large;  // DoG gate kernels (1D)
+
+  void RequireFrame(const cv::Mat& gray, const cv::Mat& seen, const char* what) const {
+    Require(!gray.empty(), fmt::format("{}: empty texture", what));
+    Require(gray.type() == CV_32FC1, fmt::format("{}: expected a gray linear-float texture (CV_32FC1), got type {} "
+                                                 "with {} channels",
+                                                 what, gray.type(), gray.channels()));
+    Require(gray.rows == R && gray.cols == R, fmt::format("{}: texture is {}x{}, expected {}x{} (the model's map "
+                                                          "resolution)",
+                                                          what, gray.cols, gray.rows, R, R));
+    if (!seen.empty()) {
+      Require(seen.type() == CV_8UC1,
+              fmt::format("{}: the seen mask must be CV_8UC1, got type {}", what, seen.type()));
+      Require(seen.rows == R && seen.cols == R,
+              fmt::format("{}: the seen mask is {}x{}, expected {}x{}", what, seen.cols, seen.rows, R, R));
+    }
+  }
+
+  // Which patches drop out of this frame (header "Unseen texels"): 1 = dropped.
+  std::vector<uint8_t> Drops(const cv::Mat& src, const cv::Mat& seen) const {
+    const Impl& m = *this;
+    const int N = layout.num_patches();
+    std::vector<uint8_t> drop(N, 0);
+    cv::Mat mask;  // coverage ∧ seen (CV_8U), for the gate
+    if (!seen.empty()) {
+      const cv::Mat s = seen.isContinuous() ? seen : seen.clone();
+      const uint8_t* sp = s.ptr<uint8_t>(0);
+      const int grid = kFootprintGrid * kFootprintGrid;
+      const int allowed = static_cast<int>(std::floor(m.options.patch_max_unseen_fraction * grid + 1e-9));
+      for (int k = 0; k < N; ++k) {
+        int unseen = 0;
+        for (int g = 0; g < grid; ++g) {
+          const int32_t i = m.footprint[static_cast<size_t>(k) * grid + g];
+          unseen += (i < 0 || !sp[i]);
+        }
+        drop[k] = unseen > allowed;
+      }
+    }
+    if (m.options.gate_by_response) {
+      if (seen.empty()) {
+        mask = m.coverage;
+      } else {
+        cv::Mat s;
+        cv::compare(seen, 0, s, cv::CMP_NE);
+        cv::bitwise_and(m.coverage, s, mask);
+      }
+      const float alpha = static_cast<float>(m.model.wrinkle.wrinkle_threshold);
+      tbb::parallel_for(tbb::blocked_range<int>(0, N, 16), [&](const tbb::blocked_range<int>& r) {
+        for (int k = r.begin(); k != r.end(); ++k) {
+          if (drop[k]) continue;
+          const PatchFrame& f = m.layout.patches[k];
+          const int x = std::clamp(static_cast<int>(std::lround(f.center_texel.x())), 0, R - 1);
+          const int y = std::clamp(static_cast<int>(std::lround(f.center_texel.y())), 0, R - 1);
+          if (!(m.CentreResponse(src, mask, x, y) > alpha)) drop[k] = 1;
+        }
+      });
+    }
+    return drop;
+  }
+
+  // The optional gate: the DoG response r = G_large * T − G_small * T at texel
+  // (x, y), normalised convolutions over `m` = coverage ∧ seen, as DogResponse.
+  float CentreResponse(const cv::Mat& gray, const cv::Mat& mask, int x, int y) const {
+    const int rl = static_cast<int>(taps_large.size()) / 2, rs = static_cast<int>(taps_small.size()) / 2;
+    double nl = 0, dl = 0, ns = 0, ds = 0;
+    for (int dy = -rl; dy <= rl; ++dy) {
+      const int yy = y + dy;
+      if (yy < 0 || yy >= R) continue;
+      const float* t = gray.ptr<float>(yy);
+      const uint8_t* m = mask.ptr<uint8_t>(yy);
+      float row_nl = 0, row_dl = 0, row_ns = 0, row_ds = 0;
+      const int xa = std::max(-rl, -x), xb = std::min(rl, R - 1 - x);
+      for (int dx = xa; dx <= xb; ++dx) {  // masked texels weigh 0
+        const bool in = m[x + dx] != 0;
+        const float gl = in ? taps_large[dx + rl] : 0.0f, tv = in ? t[x + dx] : 0.0f;  // unseen may hold NaN
+        row_nl += gl * tv;
+        row_dl += gl;
+      }
+      if (dy >= -rs && dy <= rs) {
+        const int sa = std::max(-rs, -x), sb = std::min(rs, R - 1 - x);
+        for (int dx = sa; dx <= sb; ++dx) {
+          const bool in = m[x + dx] != 0;
+          const float gs = in ? taps_small[dx + rs] : 0.0f, tv = in ? t[x + dx] : 0.0f;
+          row_ns += gs * tv;
+          row_ds += gs;
+        }
+      }
+      nl += taps_large[dy + rl] * row_nl;
+      dl += taps_large[dy + rl] * row_dl;
+      if (dy >= -rs && dy <= rs) {
+        ns += taps_small[dy + rs] * row_ns;
+        ds += taps_small[dy + rs] * row_ds;
+      }
+    }
+    if (!(dl > 1e-6 && ds > 1e-6)) return 0.0f;
+    return static_cast<float>(nl / dl - ns / ds);
+  }
+};
+
+DetailRegressor::DetailRegressor(const DetailModel& model, const std::vector<RegionMask>& regions,
+                                 const cv::Mat& coverage, const DetailRegressionOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  options.Check();
+  model.Validate("DetailRegressor: model");
+  Impl& m = *impl_;
+  m.model = model;
+  m.options = options;
+  m.R = model.map_resolution;
+  Require(!coverage.empty() && coverage.type() == CV_8UC1,
+          fmt::format("DetailRegressor: the face-chart coverage must be a non-empty CV_8UC1 mask, got type {}",
+                      coverage.type()));
+  Require(coverage.rows == m.R && coverage.cols == m.R,
+          fmt::format("DetailRegressor: the coverage is {}x{}, expected {}x{} (the model's map resolution)",
+                      coverage.cols, coverage.rows, m.R, m.R));
+  cv::compare(coverage, 0, m.coverage, cv::CMP_NE);
+  m.builder.emplace(m.R, m.coverage, regions, model.wrinkle);
+  m.seen_count = cv::Mat(m.R, m.R, CV_32S, cv::Scalar(0));
+  const double scale = SigmaScale(model.wrinkle, m.R);
+  m.taps_small = GaussianTaps(model.wrinkle.dog_small_sigma * scale);
+  m.taps_large = GaussianTaps(model.wrinkle.dog_large_sigma * scale);
+}
+
+DetailRegressor::~DetailRegressor() = default;
+DetailRegressor::DetailRegressor(DetailRegressor&&) noexcept = default;
+DetailRegressor& DetailRegressor::operator=(DetailRegressor&&) noexcept = default;
+
+void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen) {
+  Impl& m = *impl_;
+  Require(!m.fixed, "DetailRegressor::AddWrinkleFrame: the layout is already fixed (FixLayout was called)");
+  m.RequireFrame(gray, seen, "DetailRegressor::AddWrinkleFrame");
+  const int R = m.R;
+  // Seen chart texels.
+  cv::Mat seen_chart = m.coverage.clone();
+  if (!seen.empty()) {
+    cv::Mat s;
+    cv::compare(seen, 0, s, cv::CMP_NE);
+    cv::bitwise_and(seen_chart, s, seen_chart);
+  }
+  cv::Mat texture = gray;
+  const int unseen = cv::countNonZero(m.coverage) - cv::countNonZero(seen_chart);
+  if (unseen > 0) {
+    // Smooth extension of the seen texels into the unseen chart texels (header):
+    // normalised Gaussian on a 4× coarser grid, bilinear back up.
+    const int f = R >= 64 ? 4 : 1;
+    cv::Mat m01, tm;
+    seen_chart.convertTo(m01, CV_32F, 1.0 / 255.0);
+    cv::Mat clean = gray.clone();
+    clean.setTo(0.0f, seen_chart == 0);  // unseen may hold anything
+    cv::multiply(clean, m01, tm);
+    cv::Mat tm_s, m_s;
+    cv::resize(tm, tm_s, cv::Size(R / f, R / f), 0, 0, cv::INTER_AREA);
+    cv::resize(m01, m_s, cv::Size(R / f, R / f), 0, 0, cv::INTER_AREA);
+    const double sigma = m.options.wrinkle_extension_sigma * SigmaScale(m.model.wrinkle, R) / f;
+    cv::GaussianBlur(tm_s, tm_s, cv::Size(0, 0), sigma, sigma, cv::BORDER_CONSTANT);
+    cv::GaussianBlur(m_s, m_s, cv::Size(0, 0), sigma, sigma, cv::BORDER_CONSTANT);
+    const double mean_seen = cv::countNonZero(seen_chart) > 0 ? cv::mean(clean, seen_chart)[0] : 0.5;
+    cv::Mat ext_s(tm_s.size(), CV_32F);
+    for (int y = 0; y < ext_s.rows; ++y) {
+      const float* n = tm_s.ptr<float>(y);
+      const float* d = m_s.ptr<float>(y);
+      float* o = ext_s.ptr<float>(y);
+      for (int x = 0; x < ext_s.cols; ++x) o[x] = d[x] > 1e-4f ? n[x] / d[x] : static_cast<float>(mean_seen);
+    }
+    cv::Mat ext;
+    cv::resize(ext_s, ext, cv::Size(R, R), 0, 0, cv::INTER_LINEAR);
+    ext.copyTo(clean, seen_chart == 0);
+    texture = clean;
+  }
+  m.builder->Add(texture, fmt::format("DetailRegressor::AddWrinkleFrame: frame {}", m.frames));
+  cv::add(m.seen_count, cv::Scalar(1), m.seen_count, seen_chart);
+  ++m.frames;
+}
+
+bool DetailRegressor::NeedsWrinkleFrames() const {
+  return !impl_->fixed && impl_->frames < impl_->options.wrinkle_frames;
+}
+
+void DetailRegressor::FixLayout() {
+  Impl& m = *impl_;
+  Require(!m.fixed, "DetailRegressor::FixLayout: the layout is already fixed");
+  Require(m.frames > 0, "DetailRegressor::FixLayout: no wrinkle frames were added (call AddWrinkleFrame with the "
+                        "first N frames' textures first, Sec. 5.2)");
+  const int R = m.R;
+  m.wmap = m.builder->Finish();
+  // W(p) = Σ_j [r_j > α] r_j / J_p, 0 where J_p < min fraction · J (header).
+  const double min_seen = std::max(1.0, m.options.wrinkle_min_seen_fraction * m.frames);
+  const float J = static_cast<float>(m.frames);
+  for (int y = 0; y < R; ++y) {
+    float* w = m.wmap.probability.ptr<float>(y);
+    const int* c = m.seen_count.ptr<int>(y);
+    for (int x = 0; x < R; ++x) w[x] = c[x] >= min_seen - 1e-9 ? w[x] * J / static_cast<float>(c[x]) : 0.0f;
+  }
+  m.layout = PlacePatches(m.wmap, m.model.patch, &m.layout_report);
+  m.builder.reset();
+  const int N = m.layout.num_patches(), w = m.layout.patch_size;
+  cv::Mat known(R, R, CV_8U, cv::Scalar(0));
+  if (N > 0) {
+    m.sampler.emplace(m.layout);
+    cv::compare(m.sampler->splat_weight(), 0.0f, known, cv::CMP_GT);
+    // Footprint grid of every patch (sample positions as patches.h defines them).
+    m.footprint.resize(static_cast<size_t>(N) * kFootprintGrid * kFootprintGrid);
+    for (int k = 0; k < N; ++k) {
+      const PatchFrame& f = m.layout.patches[k];
+      const double c = std::cos(static_cast<double>(f.angle)), s = std::sin(static_cast<double>(f.angle));
+      const double half = 0.5 * (w - 1);
+      for (int gb = 0; gb < kFootprintGrid; ++gb) {
+        for (int ga = 0; ga < kFootprintGrid; ++ga) {
+          const double a = std::round(ga * (w - 1) / double(kFootprintGrid - 1)) - half;
+          const double b = std::round(gb * (w - 1) / double(kFootprintGrid - 1)) - half;
+          const int x = static_cast<int>(std::lround(f.center_texel.x() + a * c - b * s));
+          const int y = static_cast<int>(std::lround(f.center_texel.y() + a * s + b * c));
+          m.footprint[(static_cast<size_t>(k) * kFootprintGrid + gb) * kFootprintGrid + ga] =
+              (x < 0 || y < 0 || x >= R || y >= R) ? -1 : y * R + x;
+        }
+      }
+    }
+  }
+  if (N > 0) {
+    // Per-patch shares (Impl::share_*): patches coloured so that the discs of radius
+    // r around the centres (which hold their bilinear footprints) of one colour are
+    // disjoint; one Splat of a colour's indicator then gives each of its patches' shares.
+    const float r = 0.5f * static_cast<float>(w - 1) * std::numbers::sqrt2_v<float> + 2.0f;
+    std::vector<int> colour(N, -1);
+    std::vector<std::vector<int>> members;
+    for (int k = 0; k < N; ++k) {
+      for (int c = 0;; ++c) {
+        if (c == static_cast<int>(members.size())) members.emplace_back();
+        bool free = true;
+        for (int j : members[c]) {
+          if ((m.layout.patches[j].center_texel - m.layout.patches[k].center_texel).norm() <= 2.0f * r) {
+            free = false;
+            break;
+          }
+        }
+        if (free) {
+          colour[k] = c;
+          members[c].push_back(k);
+          break;
+        }
+      }
+    }
+    std::vector<std::vector<std::pair<int32_t, float>>> lists(N);
+    for (const std::vector<int>& group : members) {
+      Eigen::MatrixXf indicator = Eigen::MatrixXf::Zero(N, w * w);
+      for (int k : group) indicator.row(k).setOnes();
+      const cv::Mat share = m.sampler->Splat(indicator);
+      for (int k : group) {
+        const Eigen::Vector2f& c = m.layout.patches[k].center_texel;
+        const int x0 = std::max(0, static_cast<int>(std::floor(c.x() - r))), x1 = std::min(R - 1, static_cast<int>(std::ceil(c.x() + r)));
+        const int y0 = std::max(0, static_cast<int>(std::floor(c.y() - r))), y1 = std::min(R - 1, static_cast<int>(std::ceil(c.y() + r)));
+        for (int y = y0; y <= y1; ++y) {
+          const float* sp = share.ptr<float>(y);
+          for (int x = x0; x <= x1; ++x) {
+            const float dx = x - c.x(), dy = y - c.y();
+            if (sp[x] > 0.0f && dx * dx + dy * dy <= r * r) lists[k].emplace_back(y * R + x, sp[x]);
+          }
+        }
+      }
+    }
+    m.share_begin.assign(1, 0);
+    for (int k = 0; k < N; ++k) {
+      for (const auto& [t, v] : lists[k]) {
+        m.share_texel.push_back(t);
+        m.share_value.push_back(v);
+      }
+      m.share_begin.push_back(static_cast<int64_t>(m.share_texel.size()));
+    }
+  }
+  m.fill.emplace(m.coverage, known, m.options.fill);
+  m.fixed = true;
+}
+
+bool DetailRegressor::layout_fixed() const { return impl_->fixed; }
+
+cv::Mat DetailRegressor::Regress(const cv::Mat& gray, const cv::Mat& seen, DetailTiming* timing) const {
+  const Impl& m = *impl_;
+  Require(m.fixed, "DetailRegressor::Regress: the layout is not fixed yet (add the first N frames with "
+                   "AddWrinkleFrame, then call FixLayout)");
+  m.RequireFrame(gray, seen, "DetailRegressor::Regress");
+  DetailTiming t;
+  const int R = m.R, N = m.layout.num_patches();
+  t.patches = N;
+  cv::Mat D;
+  if (N == 0) {
+    D = cv::Mat(R, R, CV_32F, cv::Scalar(0));
+    if (timing) *timing = t;
+    return D;
+  }
+  const int w = m.layout.patch_size, n = w * w, Dim = m.model.pca.dimensions();
+
+  // 1. Sample t_i on the fixed layout; which patches drop out this frame.
+  auto t0 = Clock::now();
+  const cv::Mat src = gray.isContinuous() ? gray : gray.clone();
+  Eigen::MatrixXf sampled;  // N × n, column-major (PatchSampler's layout)
+  m.sampler->Sample(src, &sampled);
+  const RowMatrixXf patches = sampled;  // one patch per row, for PredictBatch
+  const std::vector<uint8_t> drop = m.Drops(src, seen);
+  int dropped = 0;
+  for (uint8_t d : drop) dropped += d;
+  t.dropped = dropped;
+  t.sample_ms = MsSince(t0);
+
+  // 2. Eq. 6: c_i = c̄ + Σ_k R^k(t_i).
+  t0 = Clock::now();
+  RowMatrixXf c(N, Dim);
+  m.model.cascade.PredictBatch(patches.data(), N, c.data());
+  t.regress_ms = MsSince(t0);
+
+  // 3. d_i = mean + basis · c_i (dropped patches: 0), in fixed column blocks.
+  t0 = Clock::now();
+  Eigen::MatrixXf d(N, n);  // column-major, as Splat takes it
+  const Eigen::MatrixXf& basis = m.model.pca.basis;  // n × D
+  const Eigen::VectorXf& mean = m.model.pca.mean;
+  constexpr int kBlock = 128;
+  tbb::parallel_for(tbb::blocked_range<int>(0, (n + kBlock - 1) / kBlock), [&](const tbb::blocked_range<int>& r) {
+    for (int b = r.begin(); b != r.end(); ++b) {
+      const int j0 = b * kBlock, cols = std::min(kBlock, n - j0);
+      d.middleCols(j0, cols).noalias() = c * basis.middleRows(j0, cols).transpose();
+      d.middleCols(j0, cols).rowwise() += mean.segment(j0, cols).transpose();
+      if (dropped > 0) {
+        for (int k = 0; k < N; ++k)
+          if (drop[k]) d.block(k, j0, 1, cols).setZero();
+      }
+    }
+  });
+  t.reconstruct_ms = MsSince(t0);
+
+  // 4. Merge: average over the (kept) patches covering each texel.
+  t0 = Clock::now();
+  D = m.sampler->Splat(d);  // Σ_kept w d / Σ_all w (dropped rows are 0)
+  if (dropped > 0) {
+    // Renormalise where dropped patches had weight: divide by the kept share
+    // 1 − Σ_dropped w_k / Σ w, only on the dropped patches' footprints (sequential,
+    // fixed order). calloc: only the touched pages of the scratch map are zeroed.
+    std::unique_ptr<float, decltype(&std::free)> acc(static_cast<float*>(std::calloc(static_cast<size_t>(R) * R, sizeof(float))),
+                                                     &std::free);
+    Require(acc != nullptr, "DetailRegressor::Regress: out of memory");
+    std::vector<int32_t> touched;
+    for (int k = 0; k < N; ++k) {
+      if (!drop[k]) continue;
+      for (int64_t e = m.share_begin[k]; e < m.share_begin[k + 1]; ++e) {
+        float& a = acc.get()[m.share_texel[e]];
+        if (a == 0.0f) touched.push_back(m.share_texel[e]);
+        a += m.share_value[e];
+      }
+    }
+    float* o = D.ptr<float>(0);
+    for (int32_t t : touched) {
+      const float kept = 1.0f - acc.get()[t];
+      o[t] = kept > 1e-4f ? o[t] / kept : 0.0f;
+    }
+  }
+  t.merge_ms = MsSince(t0);
+
+  // 5. Poisson fill of the uncovered chart texels; 0 outside the chart.
+  t0 = Clock::now();
+  m.fill->Apply(&D);
+  t.fill_ms = MsSince(t0);
+  if (timing) *timing = t;
+  return D;
+}
+
+std::vector<uint8_t> DetailRegressor::DroppedPatches(const cv::Mat& gray, const cv::Mat& seen) const {
+  const Impl& m = *impl_;
+  Require(m.fixed, "DetailRegressor::DroppedPatches: the layout is not fixed yet");
+  m.RequireFrame(gray, seen, "DetailRegressor::DroppedPatches");
+  if (m.layout.num_patches() == 0) return {};
+  return m.Drops(gray.isContinuous() ? gray : gray.clone(), seen);
+}
+
+const WrinkleMap& DetailRegressor::wrinkle_map() const {
+  Require(impl_->fixed, "DetailRegressor::wrinkle_map: call FixLayout first");
+  return impl_->wmap;
+}
+const PatchLayout& DetailRegressor::layout() const {
+  Require(impl_->fixed, "DetailRegressor::layout: call FixLayout first");
+  return impl_->layout;
+}
+const PatchLayoutReport& DetailRegressor::layout_report() const {
+  Require(impl_->fixed, "DetailRegressor::layout_report: call FixLayout first");
+  return impl_->layout_report;
+}
+const PoissonFill& DetailRegressor::fill() const {
+  Require(impl_->fixed, "DetailRegressor::fill: call FixLayout first");
+  return *impl_->fill;
+}
+int DetailRegressor::frames_added() const { return impl_->frames; }
+int DetailRegressor::map_size() const { return impl_->R; }
+
+}  // namespace crease

@@ -1,0 +1,964 @@
+#include "pipeline/capture/flow_refinement.h"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <queue>
+#include <set>
+#include <unordered_map>
+
+#include <fmt/format.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+#include <Eigen/Cholesky>
+#include <Eigen/SparseCholesky>
+#include <opencv2/video/tracking.hpp>
+
+#include "core/error.h"
+#include "core/mesh_ops.h"
+#include "core/options.h"
+
+namespace crease {
+
+void FlowRefinementOptions::VisitFields(OptionVisitor& v) {
+  v.Field("lk_window", lk_window);
+  v.Field("lk_pyramid_levels", lk_pyramid_levels);
+  v.Field("lk_max_iterations", lk_max_iterations);
+  v.Field("lk_epsilon_px", lk_epsilon_px);
+  v.Field("lk_min_eigenvalue", lk_min_eigenvalue);
+  v.Field("lk_predict_from_tracker", lk_predict_from_tracker);
+  v.Field("outlier_intensity", outlier_intensity);
+  v.Field("outlier_distance_px", outlier_distance_px);
+  v.Field("flow_point_spacing_mm", flow_point_spacing_mm);
+  v.Field("front_facing_min_cos", front_facing_min_cos);
+  v.Field("mls_neighbours", mls_neighbours);
+  v.Field("mls_radius_mm", mls_radius_mm);
+  v.Field("mls_alpha", mls_alpha);
+  v.Field("mls_min_neighbours", mls_min_neighbours);
+  v.Field("fit_flow_weight", fit_flow_weight);
+  v.Field("fit_landmark_weight", fit_landmark_weight);
+  v.Field("fit_expression_prior_weight", fit_expression_prior_weight);
+  v.Field("fit_tracker_prior_weight", fit_tracker_prior_weight);
+  v.Field("fit_iterations", fit_iterations);
+  v.Field("fit_hessian_refresh", fit_hessian_refresh);
+  v.Field("laplacian", laplacian);
+  v.Field("laplacian_order", laplacian_order);
+  v.Field("laplacian_smoothness", laplacian_smoothness);
+  v.Field("laplacian_flow_weight", laplacian_flow_weight);
+  v.Field("laplacian_landmark_weight", laplacian_landmark_weight);
+}
+
+void FlowRefinementOptions::Check() const {
+  const char* o = "FlowRefinementOptions";
+  CheckGe(o, "lk_window", lk_window, 5);
+  if (lk_window % 2 != 1) throw Error(fmt::format("{}.lk_window = {} must be odd", o, lk_window));
+  CheckGe(o, "lk_pyramid_levels", lk_pyramid_levels, 1);
+  CheckLe(o, "lk_pyramid_levels", lk_pyramid_levels, 8);
+  CheckGe(o, "lk_max_iterations", lk_max_iterations, 1);
+  CheckGt(o, "lk_epsilon_px", lk_epsilon_px, 0.0);
+  CheckGe(o, "lk_min_eigenvalue", lk_min_eigenvalue, 0.0);
+  CheckGt(o, "outlier_intensity", outlier_intensity, 0.0);
+  CheckGt(o, "outlier_distance_px", outlier_distance_px, 0.0);
+  CheckGt(o, "flow_point_spacing_mm", flow_point_spacing_mm, 0.5);
+  CheckGe(o, "front_facing_min_cos", front_facing_min_cos, -1.0);
+  CheckLt(o, "front_facing_min_cos", front_facing_min_cos, 1.0);
+  CheckGe(o, "mls_neighbours", mls_neighbours, 1);
+  CheckGt(o, "mls_radius_mm", mls_radius_mm, 0.0);
+  CheckGe(o, "mls_alpha", mls_alpha, 0.0);
+  CheckGe(o, "mls_min_neighbours", mls_min_neighbours, 1);
+  CheckLe(o, "mls_min_neighbours", mls_min_neighbours, mls_neighbours);
+  CheckGe(o, "fit_flow_weight", fit_flow_weight, 0.0);
+  CheckGe(o, "fit_landmark_weight", fit_landmark_weight, 0.0);
+  CheckGe(o, "fit_expression_prior_weight", fit_expression_prior_weight, 0.0);
+  CheckGe(o, "fit_tracker_prior_weight", fit_tracker_prior_weight, 0.0);
+  CheckGe(o, "fit_iterations", fit_iterations, 0);
+  CheckGe(o, "fit_hessian_refresh", fit_hessian_refresh, 1);
+  CheckGe(o, "laplacian_order", laplacian_order, 1);
+  CheckLe(o, "laplacian_order", laplacian_order, 2);
+  CheckGt(o, "laplacian_smoothness", laplacian_smoothness, 0.0);
+  CheckGe(o, "laplacian_flow_weight", laplacian_flow_weight, 0.0);
+  CheckGe(o, "laplacian_landmark_weight", laplacian_landmark_weight, 0.0);
+}
+
+const char* ToString(FlowPointStatus status) {
+  switch (status) {
+    case FlowPointStatus::kInvisible:
+      return "invisible";
+    case FlowPointStatus::kTrusted:
+      return "trusted";
+    case FlowPointStatus::kRecovered:
+      return "recovered";
+    case FlowPointStatus::kReset:
+      return "reset";
+  }
+  return "unknown";
+}
+
+// Affine MLS, Schaefer et al. 2006 Eq. 3–5 in row-vector form:
+//   f(v) = (v − p*) (Σ_j p̂_jᵀ w_j p̂_j)⁻¹ Σ_j w_j p̂_jᵀ q̂_j + q*.
+bool MlsAffine(const Eigen::Vector2d& v, const MatX2d& p, const MatX2d& q, const Eigen::VectorXd& w,
+               Eigen::Vector2d* out) {
+  const Eigen::Index n = p.rows();
+  if (!(q.rows() == n && w.size() == n))
+    throw Error(fmt::format("MlsAffine: {} points, {} images and {} weights (must be equal)", n, q.rows(), w.size()));
+  double sw = 0.0;
+  Eigen::Vector2d ps = Eigen::Vector2d::Zero(), qs = Eigen::Vector2d::Zero();
+  for (Eigen::Index j = 0; j < n; ++j) {
+    sw += w[j];
+    ps += w[j] * p.row(j).transpose();
+    qs += w[j] * q.row(j).transpose();
+  }
+  if (!(sw > 0.0) || !std::isfinite(sw)) return false;
+  ps /= sw;
+  qs /= sw;
+  Eigen::Matrix2d A = Eigen::Matrix2d::Zero(), B = Eigen::Matrix2d::Zero();
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const Eigen::Vector2d ph = p.row(j).transpose() - ps, qh = q.row(j).transpose() - qs;
+    A += w[j] * ph * ph.transpose();
+    B += w[j] * ph * qh.transpose();
+  }
+  const double tr = A.trace();
+  // Near-collinear (or single) control points: the affine part is undetermined.
+  if (n < 3 || !(A.determinant() > 1e-3 * 0.25 * tr * tr)) {
+    *out = v - ps + qs;
+    return true;
+  }
+  *out = qs + B.transpose() * A.inverse() * (v - ps);
+  return true;
+}
+
+RecoverCounts RecoverFlowOutliers(const FlowRefinementOptions& options, const FlowNeighbours& neighbours,
+                                  const MatX2d& projected, MatX2d* flow, std::vector<FlowPointStatus>* status) {
+  const int n = static_cast<int>(projected.rows());
+  Require(flow != nullptr && status != nullptr, "RecoverFlowOutliers: null output");
+  if (!(flow->rows() == n && static_cast<int>(status->size()) == n && neighbours.size() == n))
+    throw Error(
+        fmt::format("RecoverFlowOutliers: {} projected points, {} flow points, {} statuses and {} neighbour lists "
+                    "(must be equal)",
+                    n, flow->rows(), status->size(), neighbours.size()));
+  if (n == 0) return {};
+  if (neighbours.begin[0] != 0 || neighbours.begin[n] != static_cast<int>(neighbours.index.size()) ||
+      neighbours.distance_mm.size() != neighbours.index.size() ||
+      !std::is_sorted(neighbours.begin.begin(), neighbours.begin.end()))
+    throw Error("RecoverFlowOutliers: malformed neighbour lists (begin must rise from 0 to the number of neighbours, "
+                "one distance per neighbour)");
+  const double xi_beta = options.outlier_distance_px;
+  int distance_outliers = 0;
+  // ξ_β on the points that passed LK and ξ_α; points without a projection take no part.
+  for (int i = 0; i < n; ++i) {
+    if (!projected.row(i).allFinite()) (*status)[i] = FlowPointStatus::kInvisible;
+    if ((*status)[i] != FlowPointStatus::kTrusted) continue;
+    if (!flow->row(i).allFinite() || (flow->row(i) - projected.row(i)).norm() > xi_beta) {
+      (*status)[i] = FlowPointStatus::kReset;
+      ++distance_outliers;
+    }
+  }
+  // Recover the outliers from the trusted points only (not from each other).
+  const std::vector<FlowPointStatus> in = *status;
+  RecoverCounts counts;
+  counts.distance_outliers = distance_outliers;
+  MatX2d p, q;
+  Eigen::VectorXd w;
+  for (int i = 0; i < n; ++i) {
+    if (in[i] == FlowPointStatus::kInvisible) {
+      ++counts.invisible;
+      continue;
+    }
+    if (in[i] == FlowPointStatus::kTrusted) {
+      ++counts.trusted;
+      continue;
+    }
+    const int b = neighbours.begin[i], e = neighbours.begin[i + 1];
+    p.resize(e - b, 2);
+    q.resize(e - b, 2);
+    w.resize(e - b);
+    int m = 0;
+    for (int k = b; k < e; ++k) {
+      const int j = neighbours.index[k];
+      if (j < 0 || j >= n || in[j] != FlowPointStatus::kTrusted) continue;
+      p.row(m) = projected.row(j);
+      q.row(m) = flow->row(j);
+      w[m] = 1.0 / std::pow(std::max(neighbours.distance_mm[k], 1e-6), 2.0 * options.mls_alpha);
+      ++m;
+    }
+    Eigen::Vector2d r;
+    const Eigen::Vector2d u = projected.row(i).transpose();
+    if (m >= options.mls_min_neighbours && MlsAffine(u, p.topRows(m), q.topRows(m), w.head(m), &r) && r.allFinite() &&
+        (r - u).norm() <= xi_beta) {
+      flow->row(i) = r.transpose();
+      (*status)[i] = FlowPointStatus::kRecovered;
+      ++counts.recovered;
+    } else {
+      flow->row(i) = u.transpose();
+      (*status)[i] = FlowPointStatus::kReset;
+      ++counts.reset;
+    }
+  }
+  return counts;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double MsSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
+
+// Bilinear sample of an 8-bit single-channel image, coordinates clamped to the image.
+double Bilinear8(const cv::Mat& image, double x, double y) {
+  x = std::clamp(x, 0.0, image.cols - 1.0);
+  y = std::clamp(y, 0.0, image.rows - 1.0);
+  const int x0 = std::min(static_cast<int>(x), image.cols - 2 < 0 ? 0 : image.cols - 2);
+  const int y0 = std::min(static_cast<int>(y), image.rows - 2 < 0 ? 0 : image.rows - 2);
+  const int x1 = std::min(x0 + 1, image.cols - 1), y1 = std::min(y0 + 1, image.rows - 1);
+  const double fx = x - x0, fy = y - y0;
+  const uint8_t* r0 = image.ptr<uint8_t>(y0);
+  const uint8_t* r1 = image.ptr<uint8_t>(y1);
+  return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x1]);
+}
+
+}  // namespace
+
+struct FlowRefiner::Impl {
+  const FaceRig& rig;
+  CameraIntrinsics K;
+  FlowRefinementOptions options;
+  int V = 0, E = 0, I = 0;
+
+  // Face chart and the Laplacian system.
+  MatX3i chart_F;                 // chart triangles, rig vertex ids
+  std::vector<int> chart_vertex;  // chart index → rig vertex
+  std::vector<int> free_of;       // chart index → free variable (−1: pinned to the fit)
+  int num_free = 0;
+  Eigen::SimplicialLDLT<SpMat> solver;
+  bool solver_ok = false;
+
+  // Flow points.
+  std::vector<int> flow_vertex;
+  std::vector<int> flow_free;                  // free variable of each flow point (−1: none)
+  std::vector<int> ring_begin, ring_triangle;  // per flow point, incident chart triangles
+  FlowNeighbours neighbours;
+
+  // Inner landmarks (iBUG 18–68).
+  std::vector<int> landmark_ibug;    // 0-based iBUG index
+  std::vector<int> landmark_vertex;  // rig vertex
+  std::vector<int> landmark_free;    // free variable (−1: none)
+
+  // Fit points: flow points, then inner landmarks. Rows of the bases (double).
+  std::vector<int> fit_vertex;
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> fit_B;  // (3·#fit)×E
+  Eigen::MatrixXd fit_A;                                                         // (3·#fit)×I
+  Eigen::VectorXd fit_n;                                                         // 3·#fit neutral
+  Eigen::VectorXd fit_base;                                                      // 3·#fit n + Aα
+
+  // Largest |entry| of each expression blendshape, mm.
+  Eigen::VectorXd column_max;
+  // All vertices: n + Aα, cached per identity.
+  Eigen::VectorXd base_all;
+  Eigen::VectorXd cached_identity;
+  bool has_identity = false;
+
+  // State across frames.
+  bool has_prev = false;
+  std::vector<cv::Mat> prev_pyramid;
+  MatX2d prev_refined;    // ũ^{t−1}: projection of L~^{t−1} at the flow points
+  MatX2d prev_projected;  // u^{t−1}
+  std::vector<uint8_t> prev_visible;
+
+  Impl(const FaceRig& r, const CameraIntrinsics& k, const FlowRefinementOptions& o) : rig(r), K(k), options(o) {}
+
+  void Build();
+  void SetIdentity(const Eigen::VectorXd& identity);
+  // out += Σ_b coeff_b B_b over the non-zero coefficients (all vertices, head frame).
+  void AddExpressions(const Eigen::VectorXd& coeff, Eigen::VectorXd* out) const;
+  MatX3d ToCamera(const Eigen::VectorXd& head, const Rigid3d& pose) const;
+  LandmarkFrameFit SolveFit(const std::vector<int>& points, const std::vector<Eigen::Vector2d>& targets,
+                            const std::vector<double>& weights, const Eigen::VectorXd& beta_tracker,
+                            const Rigid3d& pose0) const;
+};
+
+void FlowRefiner::Impl::Build() {
+  V = rig.num_vertices();
+  E = rig.num_expressions();
+  I = rig.num_identity();
+  const char* what = "FlowRefiner";
+  if (E <= 0) throw Error(fmt::format("{}: the rig has no expression blendshapes", what));
+  if (!(rig.expression_basis.rows() == 3 * V && (I == 0 || rig.identity_basis.rows() == 3 * V)))
+    throw Error(fmt::format("{}: the rig's bases do not have 3·#V = {} rows", what, 3 * V));
+  const TriMesh& mesh = rig.neutral;
+
+  // --- Face chart; vertices on its seam with the rest of the head are pinned.
+  chart_F = FaceChartTriangles(rig);
+  std::vector<int> chart_of(V, -1);
+  std::vector<uint8_t> is_chart_tri(mesh.num_faces(), 0);
+  {
+    // FaceChartTriangles returns a subset of the rig's triangles; mark them (by
+    // their sorted corners, so the corner order does not matter).
+    auto key = [](int a, int b, int c) {
+      std::array<int, 3> k = {a, b, c};
+      std::sort(k.begin(), k.end());
+      return k;
+    };
+    std::set<std::array<int, 3>> chart_set;
+    for (int f = 0; f < chart_F.rows(); ++f) chart_set.insert(key(chart_F(f, 0), chart_F(f, 1), chart_F(f, 2)));
+    for (int f = 0; f < mesh.num_faces(); ++f)
+      is_chart_tri[f] = chart_set.count(key(mesh.F(f, 0), mesh.F(f, 1), mesh.F(f, 2))) > 0;
+  }
+  for (int f = 0; f < chart_F.rows(); ++f) {
+    for (int c = 0; c < 3; ++c) {
+      const int v = chart_F(f, c);
+      if (chart_of[v] < 0) {
+        chart_of[v] = static_cast<int>(chart_vertex.size());
+        chart_vertex.push_back(v);
+      }
+    }
+  }
+  const int nc = static_cast<int>(chart_vertex.size());
+  const std::vector<int> rep = CoincidentVertexRepresentatives(mesh);
+  std::vector<uint8_t> outside(V, 0);
+  for (int f = 0; f < mesh.num_faces(); ++f) {
+    if (is_chart_tri[f]) continue;
+    for (int c = 0; c < 3; ++c) outside[rep[mesh.F(f, c)]] = 1;
+  }
+  free_of.assign(nc, -1);
+  for (int c = 0; c < nc; ++c) {
+    if (!outside[rep[chart_vertex[c]]]) free_of[c] = num_free++;
+  }
+  if (num_free <= 0) throw Error(fmt::format("{}: every face chart vertex touches the rest of the head", what));
+
+  // --- Inner landmarks.
+  for (int i = 17; i < LandmarkRigFitter::kNumLandmarks; ++i) {
+    const std::string name = fmt::format("ibug_{}", i + 1);
+    const int l = rig.LandmarkIndex(name);
+    if (l < 0)
+      throw Error(fmt::format("{}: the rig has no landmark '{}' (the 68 iBUG landmarks are required)", what, name));
+    const int v = rig.landmarks[l].vertex;
+    if (!(v >= 0 && v < V)) throw Error(fmt::format("{}: landmark '{}' has vertex {} outside the rig", what, name, v));
+    landmark_ibug.push_back(i);
+    landmark_vertex.push_back(v);
+    landmark_free.push_back(chart_of[v] >= 0 ? free_of[chart_of[v]] : -1);
+  }
+
+  // --- Flow points: greedy Poisson-disk sample of the free chart vertices on the
+  // neutral face, inner landmarks first.
+  {
+    const double s = options.flow_point_spacing_mm;
+    std::unordered_map<int64_t, std::vector<int>> grid;
+    auto cell = [&](const Eigen::Vector3d& p, int dx, int dy, int dz) {
+      const int64_t x = static_cast<int64_t>(std::floor(p.x() / s)) + dx;
+      const int64_t y = static_cast<int64_t>(std::floor(p.y() / s)) + dy;
+      const int64_t z = static_cast<int64_t>(std::floor(p.z() / s)) + dz;
+      return (x * 73856093) ^ (y * 19349663) ^ (z * 83492791);
+    };
+    std::vector<uint8_t> taken(V, 0);
+    auto try_add = [&](int v) {
+      if (taken[v] || chart_of[v] < 0 || free_of[chart_of[v]] < 0) return;
+      const Eigen::Vector3d p = mesh.V.row(v).transpose();
+      for (int dx = -1; dx <= 1; ++dx)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dz = -1; dz <= 1; ++dz) {
+            auto it = grid.find(cell(p, dx, dy, dz));
+            if (it == grid.end()) continue;
+            for (int u : it->second) {
+              if ((mesh.V.row(u).transpose() - p).norm() < s) return;
+            }
+          }
+      grid[cell(p, 0, 0, 0)].push_back(v);
+      taken[v] = 1;
+      flow_vertex.push_back(v);
+    };
+    for (int v : landmark_vertex) try_add(v);
+    for (int v : chart_vertex) try_add(v);
+  }
+  const int nf = static_cast<int>(flow_vertex.size());
+  if (nf < 3)
+    throw Error(fmt::format("{}: only {} flow points at a spacing of {} mm", what, nf, options.flow_point_spacing_mm));
+  std::vector<int> flow_of(V, -1);
+  for (int i = 0; i < nf; ++i) flow_of[flow_vertex[i]] = i;
+  flow_free.resize(nf);
+  for (int i = 0; i < nf; ++i) flow_free[i] = free_of[chart_of[flow_vertex[i]]];
+
+  // Incident chart triangles of each flow point (for its normal).
+  {
+    std::vector<std::vector<int>> ring(nf);
+    for (int f = 0; f < chart_F.rows(); ++f)
+      for (int c = 0; c < 3; ++c)
+        if (flow_of[chart_F(f, c)] >= 0) ring[flow_of[chart_F(f, c)]].push_back(f);
+    ring_begin.assign(1, 0);
+    for (int i = 0; i < nf; ++i) {
+      ring_triangle.insert(ring_triangle.end(), ring[i].begin(), ring[i].end());
+      ring_begin.push_back(static_cast<int>(ring_triangle.size()));
+    }
+  }
+
+  // --- Geodesic neighbours: bounded edge Dijkstra on the chart of the neutral face.
+  {
+    std::vector<std::vector<std::pair<int, double>>> adj(nc);
+    for (int f = 0; f < chart_F.rows(); ++f) {
+      for (int c = 0; c < 3; ++c) {
+        const int a = chart_of[chart_F(f, c)], b = chart_of[chart_F(f, (c + 1) % 3)];
+        const double len = (mesh.V.row(chart_F(f, c)) - mesh.V.row(chart_F(f, (c + 1) % 3))).norm();
+        adj[a].emplace_back(b, len);
+        adj[b].emplace_back(a, len);
+      }
+    }
+    std::vector<double> dist(nc, std::numeric_limits<double>::infinity());
+    std::vector<int> touched;
+    using Item = std::pair<double, int>;
+    neighbours.begin.assign(1, 0);
+    for (int i = 0; i < nf; ++i) {
+      std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
+      const int src = chart_of[flow_vertex[i]];
+      dist[src] = 0.0;
+      touched.push_back(src);
+      heap.emplace(0.0, src);
+      std::vector<std::pair<double, int>> found;
+      while (!heap.empty()) {
+        const auto [d, a] = heap.top();
+        heap.pop();
+        if (d > dist[a]) continue;
+        if (d > options.mls_radius_mm) break;
+        const int fi = flow_of[chart_vertex[a]];
+        if (fi >= 0 && fi != i) {
+          found.emplace_back(d, fi);
+          if (static_cast<int>(found.size()) >= options.mls_neighbours) break;
+        }
+        for (const auto& [b, len] : adj[a]) {
+          if (d + len < dist[b]) {
+            if (!std::isfinite(dist[b])) touched.push_back(b);
+            dist[b] = d + len;
+            heap.emplace(dist[b], b);
+          }
+        }
+      }
+      for (int a : touched) dist[a] = std::numeric_limits<double>::infinity();
+      touched.clear();
+      for (const auto& [d, j] : found) {
+        neighbours.index.push_back(j);
+        neighbours.distance_mm.push_back(d);
+      }
+      neighbours.begin.push_back(static_cast<int>(neighbours.index.size()));
+    }
+  }
+
+  // --- Fit points and their basis rows.
+  fit_vertex = flow_vertex;
+  fit_vertex.insert(fit_vertex.end(), landmark_vertex.begin(), landmark_vertex.end());
+  const int np = static_cast<int>(fit_vertex.size());
+  fit_B.resize(3 * np, E);
+  fit_A.resize(3 * np, I);
+  fit_n.resize(3 * np);
+  for (int k = 0; k < np; ++k) {
+    const int v = fit_vertex[k];
+    fit_B.middleRows(3 * k, 3) = rig.expression_basis.middleRows(3 * v, 3).cast<double>();
+    if (I > 0) fit_A.middleRows(3 * k, 3) = rig.identity_basis.middleRows(3 * v, 3).cast<double>();
+    fit_n.segment<3>(3 * k) = mesh.V.row(v).transpose();
+  }
+  fit_base = fit_n;
+  column_max = rig.expression_basis.cwiseAbs().colwise().maxCoeff().transpose().cast<double>();
+  base_all.resize(3 * V);
+  for (int v = 0; v < V; ++v) base_all.segment<3>(3 * v) = mesh.V.row(v).transpose();
+  cached_identity = Eigen::VectorXd::Zero(I);
+  has_identity = true;
+
+  // --- Laplacian system A = λ Lfᵀ M⁻¹ Lf + W (+ ε I), factorised once.
+  if (options.laplacian) {
+    TriMesh cm;
+    cm.V.resize(nc, 3);
+    for (int c = 0; c < nc; ++c) cm.V.row(c) = mesh.V.row(chart_vertex[c]);
+    cm.F.resize(chart_F.rows(), 3);
+    for (int f = 0; f < chart_F.rows(); ++f)
+      for (int c = 0; c < 3; ++c) cm.F(f, c) = chart_of[chart_F(f, c)];
+    const SpMat L = CotangentLaplacian(cm);
+    const SpMat M = MassMatrix(cm, MassMatrixType::kVoronoi);
+    std::vector<Eigen::Triplet<double>> sel;
+    for (int c = 0; c < nc; ++c)
+      if (free_of[c] >= 0) sel.emplace_back(c, free_of[c], 1.0);
+    SpMat S(nc, num_free);
+    S.setFromTriplets(sel.begin(), sel.end());
+    Eigen::VectorXd minv(nc);
+    for (int c = 0; c < nc; ++c) {
+      const double m = M.coeff(c, c);
+      minv[c] = m > 0.0 ? 1.0 / m : 0.0;
+    }
+    const SpMat Lf = L * S;
+    SpMat A = options.laplacian_order == 2 ? SpMat(Lf.transpose() * minv.asDiagonal() * Lf) : SpMat(S.transpose() * Lf);
+    A *= options.laplacian_smoothness;
+    Eigen::VectorXd w = Eigen::VectorXd::Zero(num_free);
+    for (int i = 0; i < nf; ++i)
+      if (flow_free[i] >= 0) w[flow_free[i]] += options.laplacian_flow_weight;
+    for (size_t j = 0; j < landmark_free.size(); ++j)
+      if (landmark_free[j] >= 0) w[landmark_free[j]] += options.laplacian_landmark_weight;
+    const double eps = 1e-9 * std::max(1.0, A.diagonal().mean());
+    for (int f = 0; f < num_free; ++f) A.coeffRef(f, f) += w[f] + eps;
+    A.makeCompressed();
+    solver.compute(A);
+    if (solver.info() != Eigen::Success)
+      throw Error(fmt::format("{}: the Laplacian system could not be factorised", what));
+    solver_ok = true;
+  }
+}
+
+void FlowRefiner::Impl::SetIdentity(const Eigen::VectorXd& identity) {
+  Eigen::VectorXd a = Eigen::VectorXd::Zero(I);
+  a.head(identity.size()) = identity;
+  if (has_identity && a == cached_identity) return;
+  cached_identity = a;
+  has_identity = true;
+  fit_base = fit_n;
+  if (I > 0) fit_base += fit_A * a;
+  for (int v = 0; v < V; ++v) base_all.segment<3>(3 * v) = rig.neutral.V.row(v).transpose();
+  if (I > 0) base_all += (rig.identity_basis * a.cast<float>()).cast<double>();
+}
+
+void FlowRefiner::Impl::AddExpressions(const Eigen::VectorXd& coeff, Eigen::VectorXd* out) const {
+  // Only the blendshapes in use are read (the basis is 8 MB): those moving some
+  // vertex by more than 10⁻⁴ mm.
+  std::vector<int> used;
+  for (int b = 0; b < E; ++b)
+    if (std::abs(coeff[b]) * column_max[b] > 1e-4) used.push_back(b);
+  if (used.empty()) return;
+  const int rows = 3 * V;
+  tbb::parallel_for(tbb::blocked_range<int>(0, rows, 8192), [&](const tbb::blocked_range<int>& r) {
+    const int n = static_cast<int>(r.size());
+    Eigen::VectorXf acc = Eigen::VectorXf::Zero(n);
+    for (int b : used) acc += static_cast<float>(coeff[b]) * rig.expression_basis.col(b).segment(r.begin(), n);
+    out->segment(r.begin(), n) += acc.cast<double>();
+  });
+}
+
+MatX3d FlowRefiner::Impl::ToCamera(const Eigen::VectorXd& head, const Rigid3d& pose) const {
+  const Eigen::Matrix3d R = pose.rotation.toRotationMatrix();
+  const Eigen::Vector3d& t = pose.translation;
+  MatX3d out(V, 3);
+  for (int v = 0; v < V; ++v) out.row(v) = (R * head.segment<3>(3 * v) + t).transpose();
+  return out;
+}
+
+// The 3D fit: projected Levenberg–Marquardt on y = (β, ω, t), ω a left rotation
+// increment re-linearised at every iteration (R ← exp([δω]×) R). Per point k with
+// weight w_k and target ũ_k: r_k = √w_k (π(q) − ũ_k), q = R x_k(β) + t, x_k = base_k + B_k β;
+//   ∂r/∂β = √w J_π R B_k,  ∂r/∂ω = −√w J_π [R x_k]×,  ∂r/∂t = √w J_π.
+LandmarkFrameFit FlowRefiner::Impl::SolveFit(const std::vector<int>& points,
+                                             const std::vector<Eigen::Vector2d>& targets,
+                                             const std::vector<double>& weights, const Eigen::VectorXd& beta_tracker,
+                                             const Rigid3d& pose0) const {
+  const int n = E + 6;
+  const int m = static_cast<int>(points.size());
+  const double lb = options.fit_expression_prior_weight, lt = options.fit_tracker_prior_weight;
+  Eigen::VectorXd beta = beta_tracker.cwiseMax(0.0).cwiseMin(1.0);
+  Eigen::Matrix3d R = pose0.rotation.toRotationMatrix();
+  Eigen::Vector3d t = pose0.translation;
+
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> J(2 * m, n);
+  Eigen::VectorXd r(2 * m);
+  // Residuals (and Jacobian) at (β, R, t); returns the energy.
+  auto evaluate = [&](const Eigen::VectorXd& b, const Eigen::Matrix3d& Rm, const Eigen::Vector3d& tv, bool jacobian) {
+    double cost = 0.0;
+    for (int k = 0; k < m; ++k) {
+      const int p = points[k];
+      const Eigen::Vector3d x =
+          fit_base.segment<3>(3 * p) +
+          Eigen::Vector3d(fit_B.row(3 * p).dot(b), fit_B.row(3 * p + 1).dot(b), fit_B.row(3 * p + 2).dot(b));
+      const Eigen::Vector3d Rx = Rm * x;
+      const Eigen::Vector3d q = Rx + tv;
+      const double sw = std::sqrt(weights[k]);
+      if (!(q.z() > 1e-6)) {
+        r.segment<2>(2 * k).setZero();
+        if (jacobian) J.middleRows(2 * k, 2).setZero();
+        continue;
+      }
+      const double iz = 1.0 / q.z();
+      const Eigen::Vector2d pix(K.fx * q.x() * iz + K.cx, K.fy * q.y() * iz + K.cy);
+      r.segment<2>(2 * k) = sw * (pix - targets[k]);
+      cost += r.segment<2>(2 * k).squaredNorm();
+      if (!jacobian) continue;
+      Eigen::Matrix<double, 2, 3> Jp;
+      Jp << K.fx * iz, 0.0, -K.fx * q.x() * iz * iz, 0.0, K.fy * iz, -K.fy * q.y() * iz * iz;
+      Jp *= sw;
+      const Eigen::Matrix<double, 2, 3> G = Jp * Rm;
+      // Rows of G · B_k as axpys over the contiguous rows of B_k (vectorised).
+      for (int a = 0; a < 2; ++a) {
+        J.row(2 * k + a).head(E) =
+            G(a, 0) * fit_B.row(3 * p) + G(a, 1) * fit_B.row(3 * p + 1) + G(a, 2) * fit_B.row(3 * p + 2);
+      }
+      J.block<2, 3>(2 * k, E) = -Jp * Skew(Rx);
+      J.block<2, 3>(2 * k, E + 3) = Jp;
+    }
+    cost += lb * b.squaredNorm() + lt * (b - beta_tracker).squaredNorm();
+    return cost;
+  };
+
+  LandmarkFrameFit fit;
+  double cost = evaluate(beta, R, t, true);
+  double mu = 1e-3;
+  int iterations = 0;
+  bool converged = options.fit_iterations == 0;
+  bool need_jacobian = false;
+  Eigen::MatrixXd H(n, n);
+  Eigen::VectorXd g(n);
+  int outer = 0;
+  while (iterations < options.fit_iterations && m > 0) {
+    if (need_jacobian) cost = evaluate(beta, R, t, true);
+    need_jacobian = false;
+    // JᵀJ is the costly part (2·#points × (#E + 6)²); between refreshes the step
+    // uses the last one with the current gradient (a chord Newton step; the
+    // problem is close to linear near the tracker's warm start).
+    if (outer++ % options.fit_hessian_refresh == 0) {
+      H.setZero();
+      H.selfadjointView<Eigen::Lower>().rankUpdate(J.transpose());
+      H.triangularView<Eigen::StrictlyUpper>() = H.transpose();
+      for (int e = 0; e < E; ++e) H(e, e) += lb + lt;
+    }
+    g.noalias() = J.transpose() * r;
+    for (int e = 0; e < E; ++e) g[e] += lb * beta[e] + lt * (beta[e] - beta_tracker[e]);
+    // Active bounds: weights at a bound whose gradient pushes outwards stay there.
+    std::vector<uint8_t> active(E, 0);
+    for (int e = 0; e < E; ++e) active[e] = (beta[e] <= 0.0 && g[e] > 0.0) || (beta[e] >= 1.0 && g[e] < 0.0);
+    bool accepted = false;
+    while (!accepted && iterations < options.fit_iterations) {
+      ++iterations;
+      Eigen::MatrixXd A = H;
+      Eigen::VectorXd rhs = -g;
+      for (int j = 0; j < n; ++j) A(j, j) += mu * std::max(H(j, j), 1e-9);
+      for (int e = 0; e < E; ++e) {
+        if (!active[e]) continue;
+        A.row(e).setZero();
+        A.col(e).setZero();
+        A(e, e) = 1.0;
+        rhs[e] = 0.0;
+      }
+      const Eigen::VectorXd step = A.ldlt().solve(rhs);
+      if (!step.allFinite()) break;
+      const Eigen::VectorXd beta_new = (beta + step.head(E)).cwiseMax(0.0).cwiseMin(1.0);
+      const Eigen::Matrix3d R_new = ExpSO3(step.segment<3>(E)) * R;
+      const Eigen::Vector3d t_new = t + step.tail<3>();
+      const double cost_new = evaluate(beta_new, R_new, t_new, false);
+      if (cost_new < cost) {
+        const double decrease = (cost - cost_new) / std::max(cost, 1e-12);
+        beta = beta_new;
+        R = R_new;
+        t = t_new;
+        cost = cost_new;
+        mu = std::max(mu / 3.0, 1e-7);
+        accepted = true;
+        need_jacobian = true;
+        if (decrease < 1e-6) converged = true;
+      } else {
+        mu *= 4.0;
+        if (mu > 1e8) break;
+      }
+    }
+    if (!accepted || converged) break;
+  }
+  fit.expression = beta;
+  fit.cam_from_head = Rigid3d(Eigen::Quaterniond(R), t);
+  fit.iterations = iterations;
+  fit.converged = converged;
+  // RMS of the unweighted 2D distances at the solution.
+  double se = 0.0;
+  int count = 0;
+  for (int k = 0; k < m; ++k) {
+    const int p = points[k];
+    const Eigen::Vector3d q = R * (fit_base.segment<3>(3 * p) + fit_B.middleRows(3 * p, 3).lazyProduct(beta)) + t;
+    if (!(q.z() > 1e-6)) continue;
+    const Eigen::Vector2d pix(K.fx * q.x() / q.z() + K.cx, K.fy * q.y() / q.z() + K.cy);
+    se += (pix - targets[k]).squaredNorm();
+    ++count;
+  }
+  fit.rms_px = count > 0 ? std::sqrt(se / count) : 0.0;
+  return fit;
+}
+
+FlowRefiner::FlowRefiner(const FaceRig& rig, const CameraIntrinsics& intrinsics, const FlowRefinementOptions& options)
+    : options_(options) {
+  options_.Check();
+  intrinsics.Validate("FlowRefiner: camera intrinsics");
+  impl_ = std::make_unique<Impl>(rig, intrinsics, options_);
+  impl_->Build();
+}
+
+FlowRefiner::~FlowRefiner() = default;
+FlowRefiner::FlowRefiner(FlowRefiner&&) noexcept = default;
+FlowRefiner& FlowRefiner::operator=(FlowRefiner&&) noexcept = default;
+
+const std::vector<int>& FlowRefiner::flow_vertices() const { return impl_->flow_vertex; }
+const FlowNeighbours& FlowRefiner::neighbours() const { return impl_->neighbours; }
+int FlowRefiner::num_chart_vertices() const { return static_cast<int>(impl_->chart_vertex.size()); }
+
+void FlowRefiner::Reset() {
+  impl_->has_prev = false;
+  impl_->prev_pyramid.clear();
+}
+
+RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& tracked, const Eigen::VectorXd& identity,
+                                 const std::vector<uint8_t>& visible) {
+  const auto t_start = Clock::now();
+  Impl& s = *impl_;
+  const FlowRefinementOptions& o = options_;
+  const char* what = "FlowRefiner::Refine";
+  const int V = s.V, E = s.E;
+  const int nf = static_cast<int>(s.flow_vertex.size());
+
+  // --- Input checks (before any state changes).
+  if (gray8.empty()) throw Error(fmt::format("{}: the frame is empty", what));
+  if (gray8.type() != CV_8UC1)
+    throw Error(fmt::format("{}: the frame must be 8-bit gray (CV_8UC1), got type {} with {} channels", what,
+                            gray8.type(), gray8.channels()));
+  if (!(gray8.cols == s.K.width && gray8.rows == s.K.height))
+    throw Error(fmt::format("{}: the frame is {}×{} but the camera intrinsics are {}×{}", what, gray8.cols, gray8.rows,
+                            s.K.width, s.K.height));
+  if (!(visible.empty() || static_cast<int>(visible.size()) == V))
+    throw Error(fmt::format("{}: the visibility mask has {} entries, expected one per rig vertex ({}) or none", what,
+                            visible.size(), V));
+  if (identity.size() > s.I)
+    throw Error(
+        fmt::format("{}: {} identity coefficients for a rig with {} identity modes", what, identity.size(), s.I));
+  if (!identity.allFinite()) throw Error(fmt::format("{}: the identity coefficients are not finite", what));
+  if (!tracked.tracked) {
+    Reset();
+    RefinedFrame none;
+    none.total_ms = MsSince(t_start);
+    return none;
+  }
+  const LandmarkFrameFit& tf = tracked.fit;
+  if (tf.expression.size() != E)
+    throw Error(
+        fmt::format("{}: the tracked fit has {} expression weights for a rig with {}", what, tf.expression.size(), E));
+  if (!tf.expression.allFinite())
+    throw Error(fmt::format("{}: the tracked fit's expression weights are not finite", what));
+  if (!(tf.cam_from_head.translation.allFinite() && tf.cam_from_head.rotation.coeffs().allFinite() &&
+        tf.cam_from_head.rotation.norm() > 0.5))
+    throw Error(fmt::format("{}: the tracked fit's pose (cam_from_head) is not finite", what));
+  if (!(tracked.landmarks.rows() == 0 || tracked.landmarks.rows() == LandmarkRigFitter::kNumLandmarks))
+    throw Error(fmt::format("{}: the tracked frame has {} landmarks, expected {} or none", what,
+                            tracked.landmarks.rows(), LandmarkRigFitter::kNumLandmarks));
+  for (int i = 0; i < tracked.landmarks.rows(); ++i) {
+    if (!tracked.landmarks.row(i).allFinite())
+      throw Error(fmt::format("{}: tracked landmark {} (iBUG {}) is not finite ({}, {})", what, i, i + 1,
+                              tracked.landmarks(i, 0), tracked.landmarks(i, 1)));
+  }
+  const bool use_landmarks = tracked.landmarks.rows() == LandmarkRigFitter::kNumLandmarks;
+
+  RefinedFrame out;
+  out.refined = true;
+  out.flow_vertex = s.flow_vertex;
+
+  // --- L^t and the flow points' projections u^t, in parallel with the frame's pyramid.
+  const cv::Size win(o.lk_window, o.lk_window);
+  std::vector<cv::Mat> pyramid;
+  double pyramid_ms = 0.0;
+  auto build_pyramid = [&] {
+    const auto tp = Clock::now();
+    cv::buildOpticalFlowPyramid(gray8, pyramid, win, o.lk_pyramid_levels - 1, true, cv::BORDER_REFLECT_101,
+                                cv::BORDER_CONSTANT, false);
+    pyramid_ms = MsSince(tp);
+  };
+  Eigen::VectorXd head;
+  MatX2d u(nf, 2);
+  std::vector<uint8_t> vis(nf, 0);
+  auto evaluate_coarse = [&] {
+    const auto te = Clock::now();
+    s.SetIdentity(identity);
+    head = s.base_all;
+    s.AddExpressions(tf.expression, &head);
+    out.coarse_vertices = s.ToCamera(head, tf.cam_from_head);
+    const MatX3d& Lc = out.coarse_vertices;
+    const int half = o.lk_window / 2;
+    for (int i = 0; i < nf; ++i) {
+      const int v = s.flow_vertex[i];
+      const Eigen::Vector3d X = Lc.row(v).transpose();
+      if (!(X.z() > 1e-6)) {
+        u.row(i).setConstant(std::numeric_limits<double>::quiet_NaN());
+        continue;
+      }
+      u(i, 0) = s.K.fx * X.x() / X.z() + s.K.cx;
+      u(i, 1) = s.K.fy * X.y() / X.z() + s.K.cy;
+      bool ok =
+          u(i, 0) >= half && u(i, 1) >= half && u(i, 0) <= s.K.width - 1 - half && u(i, 1) <= s.K.height - 1 - half;
+      if (ok && !visible.empty()) ok = visible[v] != 0;
+      if (ok) {  // grazing windows track badly, with or without a mask
+        Eigen::Vector3d nrm = Eigen::Vector3d::Zero();
+        for (int k = s.ring_begin[i]; k < s.ring_begin[i + 1]; ++k) {
+          const int f = s.ring_triangle[k];
+          const Eigen::Vector3d p0 = Lc.row(s.chart_F(f, 0)).transpose();
+          nrm += (Lc.row(s.chart_F(f, 1)).transpose() - p0).cross(Lc.row(s.chart_F(f, 2)).transpose() - p0);
+        }
+        ok = nrm.dot(-X) >= o.front_facing_min_cos * nrm.norm() * X.norm() && nrm.norm() > 0.0;
+      }
+      vis[i] = ok;
+    }
+    out.projected_positions = u;
+    out.evaluate_ms = MsSince(te);
+  };
+  tbb::parallel_invoke(build_pyramid, evaluate_coarse);
+
+  // --- Lucas–Kanade from ũ^{t−1} (Eq. 5) and the intensity test ξ_α.
+  auto t0 = Clock::now();
+  MatX2d flow = u;
+  std::vector<FlowPointStatus> status(nf, FlowPointStatus::kInvisible);
+  for (int i = 0; i < nf; ++i)
+    if (vis[i]) status[i] = FlowPointStatus::kReset;  // no flow yet (first frame: stays so)
+  if (s.has_prev) {
+    std::vector<int> idx;
+    std::vector<cv::Point2f> from, to;
+    for (int i = 0; i < nf; ++i) {
+      if (!vis[i] || !s.prev_visible[i] || !s.prev_refined.row(i).allFinite()) continue;
+      idx.push_back(i);
+      from.emplace_back(static_cast<float>(s.prev_refined(i, 0)), static_cast<float>(s.prev_refined(i, 1)));
+      Eigen::Vector2d start = s.prev_refined.row(i).transpose();
+      if (o.lk_predict_from_tracker && s.prev_projected.row(i).allFinite())
+        start += (u.row(i) - s.prev_projected.row(i)).transpose();
+      to.emplace_back(static_cast<float>(start.x()), static_cast<float>(start.y()));
+    }
+    out.no_source = static_cast<int>(std::count(vis.begin(), vis.end(), 1)) - static_cast<int>(idx.size());
+    if (!idx.empty()) {
+      std::vector<uint8_t> lk_status;
+      std::vector<float> lk_error;
+      cv::calcOpticalFlowPyrLK(
+          s.prev_pyramid, pyramid, from, to, lk_status, lk_error, win, o.lk_pyramid_levels - 1,
+          cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, o.lk_max_iterations, o.lk_epsilon_px),
+          o.lk_predict_from_tracker ? cv::OPTFLOW_USE_INITIAL_FLOW : 0, o.lk_min_eigenvalue);
+      const cv::Mat& prev_image = s.prev_pyramid[0];
+      const cv::Mat& image = pyramid[0];
+      for (size_t k = 0; k < idx.size(); ++k) {
+        const int i = idx[k];
+        const double x = to[k].x, y = to[k].y;
+        if (!lk_status[k] || !std::isfinite(x) || !std::isfinite(y) || x < 0 || y < 0 || x > s.K.width - 1 ||
+            y > s.K.height - 1) {
+          ++out.lk_failures;
+          continue;  // outlier (kReset)
+        }
+        flow(i, 0) = x;
+        flow(i, 1) = y;
+        const double d = std::abs(Bilinear8(prev_image, from[k].x, from[k].y) - Bilinear8(image, x, y)) / 255.0;
+        if (d > o.outlier_intensity) {
+          ++out.intensity_outliers;
+          continue;  // outlier
+        }
+        status[i] = FlowPointStatus::kTrusted;
+      }
+    }
+  }
+  out.flow_ms = pyramid_ms + MsSince(t0);
+
+  // --- ξ_β and MLS recovery.
+  t0 = Clock::now();
+  const RecoverCounts counts = RecoverFlowOutliers(o, s.neighbours, u, &flow, &status);
+  out.trusted = counts.trusted;
+  out.recovered = counts.recovered;
+  out.reset = counts.reset;
+  out.invisible = counts.invisible;
+  out.distance_outliers = counts.distance_outliers;
+  out.mls_ms = MsSince(t0);
+
+  // --- 3D fit with the refined 2D positions and the tracker's landmarks.
+  t0 = Clock::now();
+  std::vector<int> points;
+  std::vector<Eigen::Vector2d> targets;
+  std::vector<double> weights;
+  if (o.fit_flow_weight > 0.0) {
+    for (int i = 0; i < nf; ++i) {
+      if (status[i] != FlowPointStatus::kTrusted && status[i] != FlowPointStatus::kRecovered) continue;
+      points.push_back(i);
+      targets.push_back(flow.row(i).transpose());
+      weights.push_back(o.fit_flow_weight);
+    }
+  }
+  if (use_landmarks && o.fit_landmark_weight > 0.0) {
+    for (size_t j = 0; j < s.landmark_ibug.size(); ++j) {
+      if (!visible.empty() && !visible[s.landmark_vertex[j]]) continue;
+      points.push_back(nf + static_cast<int>(j));
+      targets.push_back(tracked.landmarks.row(s.landmark_ibug[j]).transpose());
+      weights.push_back(o.fit_landmark_weight);
+    }
+  }
+  out.fit = s.SolveFit(points, targets, weights, tf.expression, tf.cam_from_head);
+  out.fit_ms = MsSince(t0);
+
+  // --- Fitted mesh F and the Laplacian deformation L~ = F + d. The right-hand side
+  // needs F only at the fit points (from their basis rows), so the solves run in
+  // parallel with the evaluation of all of F.
+  t0 = Clock::now();
+  const bool deform = o.laplacian && s.solver_ok;
+  Eigen::VectorXd bx, by, dx, dy;
+  if (deform) {
+    bx = Eigen::VectorXd::Zero(s.num_free);
+    by = Eigen::VectorXd::Zero(s.num_free);
+    const Eigen::Matrix3d R = out.fit.cam_from_head.rotation.toRotationMatrix();
+    // w · (back-projection of the target at the fitted depth − fitted), camera x, y.
+    auto add = [&](int k, int f, const Eigen::Vector2d& target, double w) {
+      const Eigen::Vector3d x =
+          s.fit_base.segment<3>(3 * k) + Eigen::Vector3d(s.fit_B.row(3 * k).dot(out.fit.expression),
+                                                         s.fit_B.row(3 * k + 1).dot(out.fit.expression),
+                                                         s.fit_B.row(3 * k + 2).dot(out.fit.expression));
+      const Eigen::Vector3d X = R * x + out.fit.cam_from_head.translation;
+      if (!(X.z() > 1e-6) || !target.allFinite()) return;
+      bx[f] += w * ((target.x() - s.K.cx) * X.z() / s.K.fx - X.x());
+      by[f] += w * ((target.y() - s.K.cy) * X.z() / s.K.fy - X.y());
+    };
+    for (int i = 0; i < nf; ++i) {
+      if (s.flow_free[i] < 0) continue;
+      if (status[i] == FlowPointStatus::kTrusted || status[i] == FlowPointStatus::kRecovered)
+        add(i, s.flow_free[i], flow.row(i).transpose(), o.laplacian_flow_weight);
+    }
+    if (use_landmarks) {
+      for (size_t j = 0; j < s.landmark_ibug.size(); ++j) {
+        if (s.landmark_free[j] < 0) continue;
+        if (!visible.empty() && !visible[s.landmark_vertex[j]]) continue;
+        add(nf + static_cast<int>(j), s.landmark_free[j], tracked.landmarks.row(s.landmark_ibug[j]).transpose(),
+            o.laplacian_landmark_weight);
+      }
+    }
+  }
+  double evaluate2_ms = 0.0;
+  tbb::parallel_invoke(
+      [&] {
+        if (deform) dx = s.solver.solve(bx);
+      },
+      [&] {
+        if (deform) dy = s.solver.solve(by);
+      },
+      [&] {
+        const auto te = Clock::now();
+        s.AddExpressions(out.fit.expression - tf.expression, &head);
+        out.vertices = s.ToCamera(head, out.fit.cam_from_head);
+        evaluate2_ms = MsSince(te);
+      });
+  out.evaluate_ms += evaluate2_ms;
+  if (deform) {
+    MatX3d& F = out.vertices;
+    const int nc = static_cast<int>(s.chart_vertex.size());
+    for (int c = 0; c < nc; ++c) {
+      const int f = s.free_of[c];
+      if (f < 0) continue;
+      F(s.chart_vertex[c], 0) += dx[f];
+      F(s.chart_vertex[c], 1) += dy[f];
+    }
+  }
+  // (the fitted mesh's evaluation overlaps the solves; it is counted in evaluate_ms)
+  out.laplacian_ms = std::max(0.0, MsSince(t0) - evaluate2_ms);
+  out.flow_positions = flow;
+  out.status = status;
+
+  // --- State for the next frame: ũ^t of L~^t at the flow points.
+  s.prev_refined.resize(nf, 2);
+  for (int i = 0; i < nf; ++i) {
+    const Eigen::Vector3d X = out.vertices.row(s.flow_vertex[i]).transpose();
+    if (X.z() > 1e-6) {
+      s.prev_refined(i, 0) = s.K.fx * X.x() / X.z() + s.K.cx;
+      s.prev_refined(i, 1) = s.K.fy * X.y() / X.z() + s.K.cy;
+    } else {
+      s.prev_refined.row(i).setConstant(std::numeric_limits<double>::quiet_NaN());
+    }
+  }
+  s.prev_projected = u;
+  s.prev_visible = vis;
+  s.prev_pyramid = std::move(pyramid);
+  s.has_prev = true;
+  out.total_ms = MsSince(t_start);
+  return out;
+}
+
+}  // namespace crease

@@ -1,0 +1,304 @@
+// Coarse mesh refinement L^t → L~^t with optical flow (paper Sec. 5.1).
+//
+// Per frame t, given the global tracker's coarse mesh L^t (the rig at the tracked
+// fit: β^t, cam_from_head^t, identity α fixed) and the frame I^t:
+//   1. Project: u_i^t = P(v_i^t) for the flow points i of L^t (a fixed subset of
+//      the face chart's vertices, see flow_point_spacing_mm). A point takes part
+//      when it is visible (the caller's per-vertex mask, if given), faces the camera
+//      (front_facing_min_cos, on L^t) and lies half an LK window inside the image.
+//   2. Flow (Eq. 5): pyramidal Lucas–Kanade (cv::calcOpticalFlowPyrLK, 21×21
+//      window) from the refined positions ũ_i^{t−1} of the previous frame (the
+//      projections of L~^{t−1}) to ũ_i^t. The frame's pyramid is built once (in
+//      parallel with step 1) and kept as the next frame's previous pyramid.
+//   3. Outliers: a point is an outlier when LK fails (status 0, or leaves the
+//      image), when |I^{t−1}(ũ^{t−1}) − I^t(ũ^t)| > ξ_α (gray in [0, 1], bilinear),
+//      or when ‖ũ^t − u^t‖ > ξ_β. Outliers are recovered by 2D affine moving least
+//      squares (Schaefer et al. 2006) from their trusted neighbours, neighbours and
+//      weights from geodesic distances precomputed once; a recovered point that
+//      again violates ξ_β is reset to u^t (RecoverFlowOutliers).
+//   4. 3D fit (Cao et al. 2014's post-processing "to include the 2D mesh positions
+//      as constraints in the 3D fit"): β ∈ [0, 1]^#E and the pose re-solved,
+//      warm-started from the tracker's fit, minimising
+//        E(β, R, t) = w_f Σ_{i trusted/recovered} ‖π(R x_i(β) + t) − ũ_i^t‖²
+//                   + w_l Σ_{j inner landmarks} ‖π(R x_j(β) + t) − l_j‖²
+//                   + λ_β ‖β‖² + λ_τ ‖β − β^t_tracker‖²
+//      with x(β) = n + Aα + Bβ (head frame, mm), π the pinhole projection, l_j the
+//      tracker's landmarks (iBUG 18–68). Projected Levenberg–Marquardt (weights at
+//      an active bound are held) with analytic Jacobians: ∂r/∂β = J_π R B,
+//      ∂r/∂ω = −J_π [R x]× (left rotation increment), ∂r/∂t = J_π; dense normal
+//      equations, JᵀJ rebuilt every fit_hessian_refresh steps.
+//   5. Laplacian deformation (after Li et al. 2013) of the fitted mesh F on the
+//      face chart, to allow shapes outside the prior: displacements d (camera x, y;
+//      depth unchanged) minimise
+//        λ dᵀ L d  (laplacian_order 1)  or  λ Σ_k M_k ((M⁻¹ L d)_k)²  (order 2)
+//          + w_d Σ_{flow points i} ‖d_i − δ_i‖² + w_m Σ_{inner landmarks j} ‖d_j − δ_j‖²
+//      over the face chart's vertices (L: cotangent Laplacian, M: Voronoi masses of
+//      the neutral face chart), with d = 0 on the chart's seam with the rest of the
+//      head (so the head stays closed); δ_i is the back-projection of ũ_i^t at F's
+//      depth minus F (δ = 0 for invisible and reset points: pulled to F), δ_j the
+//      same for the tracker's landmark. The weights do not change from frame to
+//      frame, so the system is factorised once (constructor) and a frame costs two
+//      triangular solves (x and y), which run in parallel with the evaluation of F
+//      on all vertices. Vertices between flow points follow by the smoothness
+//      term. L~^t = F + d.
+//
+// Lost frames: when the tracker lost the face (!tracked.tracked), Refine returns
+// an unrefined result (refined = false) and Reset()s, so the next tracked frame
+// starts from the projections u^t (no flow), like the first frame.
+//
+// Speed: see FlowRefiner below (bench/flow_refinement_bench.cc).
+//
+// Differences from the paper:
+//   1. Flow runs on a subset of the face chart's vertices ("flow points", a greedy
+//      Poisson-disk sample of the neutral face with spacing flow_point_spacing_mm,
+//      407 of the procedural rig's 6,854 face-chart vertices at 9 mm; ~260 visible
+//      in a frontal view), not on every vertex: OpenCV's CPU LK costs ~15 µs per
+//      point with a 21×21 window and 3 levels here (the paper used OpenCV's GPU
+//      LK). Vertices between flow points follow by the Laplacian deformation.
+//   2. Geodesic distance: edge-graph Dijkstra (an upper bound, within ~8 % on
+//      regular meshes, core/mesh_ops.h) on the face chart of the rig's neutral
+//      mesh (mean identity), bounded by mls_radius_mm, precomputed in the
+//      constructor (the paper: "precomputed in the first frame"; the identity
+//      changes the distances by a few %). The lid and lip slits are holes of the
+//      chart, so neighbours do not reach across a closed mouth or eye.
+//   3. MLS: the paper does not give the domain; we map the projected coarse
+//      positions u^t of the trusted neighbours onto their flow positions ũ^t and
+//      evaluate at the outlier's u^t, weights 1/d_geo^{2α} over the mls_neighbours
+//      nearest flow points within mls_radius_mm; fewer than mls_min_neighbours
+//      trusted neighbours → reset (near-collinear neighbours: translation only).
+//   4. Points without a flow source — visible now but not in the previous frame —
+//      are treated as outliers (recovered by MLS when they have trusted neighbours,
+//      else reset); in the first frame and after Reset() all are reset (ũ^t = u^t).
+//      Invisible points take ũ^t = u^t (kInvisible) and are pulled to F.
+//   5. The intensity test reads one bilinear sample of the 8-bit gray frame / 255
+//      (sRGB-encoded, what LK runs on); the paper does not say which image.
+//   6. 3D fit: Cao et al. 2014's post-processing is not described in detail; ours
+//      uses the trusted and recovered flow points plus the tracker's 51 inner
+//      landmarks (the jaw contour slides along the outline and is not used),
+//      squared (non-robust) residuals, the tracker's expression prior and a pull
+//      towards the tracker's β; no temporal prior (the tracker's fit carries it).
+//      The identity is fixed.
+//   7. Laplacian deformation: Li et al. 2013 deform in 3D towards 3D targets; ours
+//      has 2D targets and moves vertices parallel to the image plane at the fitted
+//      depth (the depth stays the prior's), with soft constraints of fixed weight
+//      so that the factorisation is reused (invisible and reset points are pulled
+//      to F rather than dropped). The default is the membrane energy (order 1): on
+//      the test sequence it was as accurate as the bi-Laplacian and its solves are
+//      ~2.5× cheaper (factor 160k vs 509k non-zeros).
+//   8. Visibility comes from the caller (depth buffer) or, when not given, from the
+//      front-facing test alone (no self-occlusion: pass a mask for large head turns).
+//   9. Not in the paper, for speed on a CPU: LK on ~260 points, the pyramid built in
+//      parallel with L^t, JᵀJ of the 3D fit reused between refreshes, only the
+//      blendshapes in use evaluated on all vertices.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/mat.hpp>
+
+#include "core/camera.h"
+#include "core/face_rig.h"
+#include "core/types.h"
+#include "pipeline/capture/landmark_fit.h"
+#include "pipeline/capture/tracker.h"
+
+namespace crease {
+
+class OptionVisitor;
+
+struct FlowRefinementOptions {
+  // --- Flow (Sec. 5.1) ---
+  // LK window side, px (Sec. 5.1: 21×21 neighbourhood). Odd, ≥ 5.
+  int lk_window = 21;
+  // Pyramid levels of LK including the full resolution (not in the paper; 3 levels
+  // follow motions up to ~±40 px between frames).
+  int lk_pyramid_levels = 3;
+  // LK stops after this many iterations per level or when the update is below
+  // lk_epsilon_px (not in the paper; OpenCV's defaults are 30 and 0.01).
+  int lk_max_iterations = 20;
+  double lk_epsilon_px = 0.03;
+  // LK's minimum eigenvalue of the window's structure tensor (OpenCV's
+  // minEigThreshold, normalised by the window's pixel count); weaker windows fail.
+  double lk_min_eigenvalue = 1e-4;
+  // Start LK at ũ^{t−1} + (u^t − u^{t−1}) (the tracker's predicted motion) instead
+  // of ũ^{t−1}. Not in the paper; helps with fast motion.
+  bool lk_predict_from_tracker = false;
+  // ξ_α: intensity outlier threshold on gray in [0, 1] (8-bit / 255), Sec. 5.1.
+  double outlier_intensity = 0.02;
+  // ξ_β: distance outlier threshold between ũ^t and u^t, px, Sec. 5.1.
+  double outlier_distance_px = 5.0;
+  // Spacing of the flow points on the neutral face, mm (not in the paper, which
+  // tracks every vertex on the GPU; see Differences 1). 9 mm: 407 points on the
+  // procedural rig's face, ~260 of them visible in a frontal view.
+  double flow_point_spacing_mm = 9.0;
+  // A point is visible only when its normal (on L^t) faces the camera with
+  // cos(angle to the viewing ray) ≥ this, with or without a visibility mask
+  // (grazing windows track badly).
+  double front_facing_min_cos = 0.25;
+
+  // --- MLS outlier recovery (Schaefer et al. 2006, affine, Sec. 5.1) ---
+  // Neighbours of each flow point (nearest by geodesic distance on the neutral face).
+  int mls_neighbours = 12;
+  // Neighbours farther than this (geodesic, mm) are not used.
+  double mls_radius_mm = 35.0;
+  // α: weights 1 / d^{2α} (Schaefer et al.'s α; 1 in their examples).
+  double mls_alpha = 1.0;
+  // An outlier needs at least this many trusted neighbours to be recovered (3 for an
+  // affine map); otherwise it is reset to u^t.
+  int mls_min_neighbours = 3;
+
+  // --- 3D fit (Sec. 5.1, "post-processing step in Cao et al. [2014]") ---
+  // w_f: weight of each trusted or recovered flow point, px⁻² (relative to a landmark's w_l).
+  double fit_flow_weight = 1.0;
+  // w_l: weight of each of the tracker's 51 inner landmarks (iBUG 18–68).
+  double fit_landmark_weight = 0.5;
+  // λ_β: expression prior (pulls β to 0), px² per unit weight² (the tracker's default).
+  double fit_expression_prior_weight = 5.0;
+  // λ_τ: pulls β towards the tracker's β, px² per unit weight² (0 disables).
+  double fit_tracker_prior_weight = 1.0;
+  // Levenberg–Marquardt iterations from the tracker's fit.
+  int fit_iterations = 5;
+  // JᵀJ is rebuilt every this many accepted steps (1 = every step, plain LM); in
+  // between, steps reuse it with the current gradient. Not in the paper: speed.
+  int fit_hessian_refresh = 3;
+
+  // --- Laplacian deformation (after Li et al. 2013) ---
+  // false: L~^t is the 3D fit (ablation).
+  bool laplacian = true;
+  // Smoothness energy: 2 = bi-Laplacian λ Σ M (M⁻¹L d)² (smooth interpolation between
+  // constraints), 1 = membrane λ dᵀL d (sparser factor, ~2.5× faster solves, but
+  // cusps at the constraints).
+  int laplacian_order = 1;
+  // λ: weight of the smoothness energy.
+  double laplacian_smoothness = 1.0;
+  // w_d: soft constraint weight of every flow point (to ũ^t, or to the fit when
+  // invisible / reset).
+  double laplacian_flow_weight = 1.0;
+  // w_m: soft constraint weight of the tracker's inner landmarks (noisier than flow).
+  double laplacian_landmark_weight = 1.0;
+
+  void VisitFields(OptionVisitor& v);
+  void Check() const;
+};
+
+enum class FlowPointStatus : uint8_t {
+  kInvisible = 0,  // not visible (or too close to the image border): ũ = u, not used
+  kTrusted,        // LK succeeded and passed both outlier tests
+  kRecovered,      // outlier recovered by MLS from trusted neighbours
+  kReset,          // outlier not recoverable, or no flow source (first frame): ũ = u
+};
+const char* ToString(FlowPointStatus status);
+
+// Per flow point, its nearest flow points by geodesic distance (compressed rows):
+// neighbours of point i are index[begin[i] … begin[i+1]), sorted by distance.
+struct FlowNeighbours {
+  std::vector<int> begin;  // n + 1 offsets
+  std::vector<int> index;  // neighbour flow point
+  std::vector<double> distance_mm;
+  int size() const { return begin.empty() ? 0 : static_cast<int>(begin.size()) - 1; }
+};
+
+// Affine moving least squares (Schaefer et al. 2006, Sec. 2.1): the affine map
+// f(x) = (x − p*) M + q* minimising Σ_j w_j ‖f(p_j) − q_j‖², evaluated at v.
+// p, q: n×2 control points and their images; w: n weights > 0. Returns false (out
+// untouched) when Σ w = 0; a degenerate (near-collinear) configuration falls back
+// to the translation q* − p*.
+bool MlsAffine(const Eigen::Vector2d& v, const MatX2d& p, const MatX2d& q, const Eigen::VectorXd& w,
+               Eigen::Vector2d* out);
+
+struct RecoverCounts {
+  int trusted = 0, recovered = 0, reset = 0, invisible = 0;
+  int distance_outliers = 0;  // trusted on input but farther than ξ_β from u
+};
+
+// Outlier test ξ_β and MLS recovery (Sec. 5.1) on one frame's flow points.
+//   projected: n×2 u^t, px.   flow: n×2 ũ^t from LK, px (in/out).
+//   status (in/out, n): in — kInvisible (skipped), kTrusted (LK succeeded and passed
+//   ξ_α), kReset (already an outlier: LK failed or ξ_α); out — every kTrusted point
+//   farther than ξ_β from u becomes an outlier too; each outlier becomes kRecovered
+//   (ũ = the MLS map of its trusted neighbours, within ξ_β of u) or kReset (ũ = u).
+// MLS weights: 1 / d_geo^{2α} from `neighbours` (geodesic distances, mm).
+RecoverCounts RecoverFlowOutliers(const FlowRefinementOptions& options, const FlowNeighbours& neighbours,
+                                  const MatX2d& projected, MatX2d* flow, std::vector<FlowPointStatus>* status);
+
+struct RefinedFrame {
+  bool refined = false;                 // false when the frame was not tracked (all else empty)
+  MatX3d vertices;                      // L~^t: all #V rig vertices, camera frame, mm
+  MatX3d coarse_vertices;               // L^t: all #V, camera frame (the tracker's fit evaluated)
+  LandmarkFrameFit fit;                 // the 3D fit with the 2D positions as constraints (β in [0,1], cam_from_head)
+  std::vector<int> flow_vertex;         // rig vertex of each flow point
+  MatX2d flow_positions;                // ũ^t per flow point, px
+  MatX2d projected_positions;           // u^t per flow point, px (projection of L^t)
+  std::vector<FlowPointStatus> status;  // per flow point
+  int trusted = 0, recovered = 0, reset = 0, invisible = 0;
+  // Outliers by cause (a point counts once, for the first test it failed): LK failed
+  // (status 0, or left the image), ξ_α, ξ_β; and visible points without a flow source.
+  int lk_failures = 0, intensity_outliers = 0, distance_outliers = 0, no_source = 0;
+  // Wall-clock times, ms. flow: pyramid (built in parallel with L^t's evaluation) +
+  // LK + ξ_α; mls: ξ_β + MLS; fit: the 3D fit; evaluate: the rig on all vertices
+  // (L^t and F), projections and visibility; laplacian: right-hand side, solves and
+  // update beyond what overlaps F's evaluation. total: the whole Refine.
+  double flow_ms = 0, mls_ms = 0, fit_ms = 0, laplacian_ms = 0;
+  double evaluate_ms = 0;
+  double total_ms = 0;
+};
+
+// The coarse mesh refinement of Sec. 5.1. Holds the state that persists across
+// frames (previous pyramid and refined positions) and what is precomputed once
+// (flow points, geodesic neighbours, the factorised Laplacian system). Not
+// thread-safe; one per sequence. `rig` must outlive the refiner.
+//
+// Speed (bench/flow_refinement_bench.cc: 640×480 studio frames of the procedural
+// rig, 14,071 vertices, 407 flow points of which 256 visible, 5 fit iterations;
+// TBB and OpenCV use both cores of this 2-vCPU machine, which was shared with other
+// engineers' builds, so the figures vary 2–3× with the load):
+//   quietest (load ~1): 6.6 ms per frame, median of 3 runs of 3 s (fastest frame
+//            4.5 ms): flow (pyramid + LK + ξ_α) 3.7, 3D fit 1.35, evaluation of
+//            L^t and F (all vertices) 1.25, Laplacian solves beyond their overlap
+//            with F 0.46, MLS 0.035 ms; front-facing test instead of a mask: 6.6 ms;
+//   load ~2: 7.6–8.9 ms mean; load ~5: ~20 ms median (main thread's CPU ~9 ms).
+//   Construction (flow points, Dijkstra neighbours, factorisation): 42 ms.
+// LK dominates (~15 µs per point and 3 levels in OpenCV's CPU code). Cheaper
+// settings (same run): flow_point_spacing_mm = 10 (204 visible points) 4.8 ms;
+// 2 pyramid levels with lk_predict_from_tracker 5.1 ms.
+class FlowRefiner {
+ public:
+  // Throws Error when the rig lacks the 68 iBUG landmarks or expressions, has no face
+  // chart, the intrinsics are invalid, or options fail Check().
+  FlowRefiner(const FaceRig& rig, const CameraIntrinsics& intrinsics, const FlowRefinementOptions& options);
+  ~FlowRefiner();
+  FlowRefiner(FlowRefiner&&) noexcept;
+  FlowRefiner& operator=(FlowRefiner&&) noexcept;
+
+  // gray8: CV_8UC1 frame of the intrinsics' size (sRGB-encoded gray, what LK runs
+  // on). tracked: the global tracker's frame (tracked.fit valid when
+  // tracked.tracked; tracked.landmarks 68×2 px, or empty to use no landmarks).
+  // identity: α (#I or fewer, zero-padded), fixed. visible: per rig vertex (#V),
+  // non-zero = visible in this frame (from a depth buffer); empty = front-facing
+  // test of L^t. When !tracked.tracked: returns {refined = false} and Reset()s.
+  // Throws Error naming the problem for an empty or wrongly sized/typed image, a
+  // wrongly sized visibility mask, identity or expression vector, non-finite
+  // landmarks, weights or pose.
+  RefinedFrame Refine(const cv::Mat& gray8, const TrackedFrame& tracked, const Eigen::VectorXd& identity,
+                      const std::vector<uint8_t>& visible = {});
+
+  // After a loss: the next frame starts from the projections u^t of L^t (no flow).
+  void Reset();
+
+  const FlowRefinementOptions& options() const { return options_; }
+  // Rig vertices of the flow points (fixed at construction).
+  const std::vector<int>& flow_vertices() const;
+  const FlowNeighbours& neighbours() const;
+  // Vertices of the face chart (those the Laplacian deformation moves).
+  int num_chart_vertices() const;
+
+ private:
+  struct Impl;
+  FlowRefinementOptions options_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace crease

@@ -1,0 +1,318 @@
+// Tests of the online detail regression (pipeline/capture/detail_regression.h,
+// paper Sec. 5.2) on a tiny model trained in-process (Sec. 4.2–4.3) on synthetic
+// line textures (dark lines = wrinkle shadows) and their displacement maps
+// (grooves along the lines).
+#include "pipeline/capture/detail_regression.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <numbers>
+
+#include <opencv2/imgproc.hpp>
+
+#include "core/rng.h"
+#include "pipeline/training/fern_cascade.h"
+#include "pipeline/training/pca.h"
+#include "tests/test_util.h"
+#include "tests/wrinkle_test_util.h"
+
+namespace crease {
+namespace {
+
+constexpr int kS = 128;  // map size
+
+// The user's wrinkle lines: centre (x, y) and direction (degrees).
+struct Line {
+  double cx, cy, deg;
+};
+const std::vector<Line>& Lines() {
+  static const std::vector<Line> lines = {{64, 40, 5}, {60, 58, -8}, {40, 90, 60}, {90, 92, 120}};
+  return lines;
+}
+
+// A texture with the lines at `depth` (0 = no lines) and its displacement map:
+// a groove of `depth` mm per unit of shadow depth along each line (D < 0 on lines),
+// lines limited to a 50-texel segment around their centre.
+void Frame(double depth, cv::Mat* texture, cv::Mat* displacement, double shift = 0.0) {
+  *texture = cv::Mat(kS, kS, CV_32F, cv::Scalar(0.5f));
+  *displacement = cv::Mat(kS, kS, CV_32F, cv::Scalar(0.0f));
+  for (const Line& l : Lines()) {
+    const double phi = l.deg * std::numbers::pi / 180.0;
+    const double tx = std::cos(phi), ty = std::sin(phi), nx = -ty, ny = tx;
+    for (int y = 0; y < kS; ++y) {
+      for (int x = 0; x < kS; ++x) {
+        const double along = (x - l.cx) * tx + (y - l.cy) * ty;
+        const double across = (x - l.cx) * nx + (y - l.cy) * ny - shift;
+        const double fade = std::exp(-std::pow(std::max(0.0, std::abs(along) - 25.0) / 4.0, 2));
+        const double g = std::exp(-across * across / (2 * 2.0 * 2.0)) * fade;
+        texture->at<float>(y, x) -= static_cast<float>(depth * g);
+        displacement->at<float>(y, x) -= static_cast<float>(0.5 * depth * g);
+      }
+    }
+  }
+}
+
+cv::Mat Chart() {
+  cv::Mat c(kS, kS, CV_8U, cv::Scalar(0));
+  cv::circle(c, cv::Point(kS / 2, kS / 2), 62, cv::Scalar(255), cv::FILLED);
+  return c;
+}
+
+// The tiny model: Sec. 4.2 wrinkle map and layout on training textures with the
+// lines at several depths and small shifts, Sec. 4.3 PCA and fern cascade.
+const DetailModel& TinyModel() {
+  static const DetailModel model = [] {
+    DetailModel m;
+    m.map_resolution = kS;
+    m.wrinkle = testing::TexelOptions();  // σ in texels, no regions
+    m.wrinkle.dog_small_sigma = 3.0;
+    m.wrinkle.dog_large_sigma = 4.0;
+    m.patch.patch_size = 16;
+    std::vector<cv::Mat> textures, displacements;
+    Rng rng(5);
+    for (int j = 0; j < 24; ++j) {
+      cv::Mat t, d;
+      Frame(0.05 + 0.25 * rng.Uniform(), &t, &d, rng.Uniform(-1.5, 1.5));
+      textures.push_back(t);
+      displacements.push_back(d);
+    }
+    std::vector<cv::Mat> responses;
+    const WrinkleMap wmap = ComputeWrinkleMap(textures, Chart(), {}, m.wrinkle, &responses);
+    const PatchLayout layout = PlacePatches(wmap, m.patch);
+    const TrainingPatches pairs = ExtractTrainingPatches(layout, textures, responses, displacements, m.wrinkle);
+    PcaOptions po;
+    po.dimensions = 4;
+    m.pca = FitPatchPca(pairs.displacement, po);
+    FernOptions fo;
+    fo.num_ferns = 120;
+    fo.num_sampled_pixels = 30;
+    fo.shrinkage = 5;
+    m.cascade = TrainFernCascade(pairs.texture, m.pca.ProjectPatches(pairs.displacement), fo).cascade;
+    m.Validate("tiny model");
+    return m;
+  }();
+  return model;
+}
+
+DetailRegressionOptions SmallOptions() {
+  DetailRegressionOptions o;
+  o.wrinkle_frames = 4;
+  o.fill.fill_resolution = 64;  // s = 2 on the 128² maps
+  return o;
+}
+
+// A regressor whose wrinkle map comes from four frames of the user's wrinkles.
+DetailRegressor FixedRegressor(const DetailRegressionOptions& options = SmallOptions()) {
+  DetailRegressor r(TinyModel(), {}, Chart(), options);
+  for (double depth : {0.1, 0.2, 0.0, 0.15}) {
+    cv::Mat t, d;
+    Frame(depth, &t, &d);
+    r.AddWrinkleFrame(t, cv::Mat());
+  }
+  EXPECT_FALSE(r.NeedsWrinkleFrames());
+  r.FixLayout();
+  return r;
+}
+
+double Correlation(const cv::Mat& a, const cv::Mat& b, const cv::Mat& mask) {
+  double sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0;
+  int n = 0;
+  for (int y = 0; y < a.rows; ++y)
+    for (int x = 0; x < a.cols; ++x)
+      if (mask.at<uint8_t>(y, x)) {
+        const double u = a.at<float>(y, x), v = b.at<float>(y, x);
+        sa += u, sb += v, saa += u * u, sbb += v * v, sab += u * v, ++n;
+      }
+  const double cov = sab / n - sa / n * sb / n;
+  return cov / std::sqrt((saa / n - sa * sa / n / n) * (sbb / n - sb * sb / n / n));
+}
+
+TEST(DetailRegression, PredictsGroovesWhereTheTextureShowsLines) {
+  const DetailRegressor r = FixedRegressor();
+  ASSERT_GT(r.layout().num_patches(), 5);
+  cv::Mat t, truth;
+  Frame(0.18, &t, &truth);
+  DetailTiming timing;
+  const cv::Mat D = r.Regress(t, cv::Mat(), &timing);
+  ASSERT_EQ(D.type(), CV_32FC1);
+  ASSERT_EQ(D.rows, kS);
+  const double corr = Correlation(D, truth, Chart());
+  double lo, hi;
+  cv::minMaxLoc(D, &lo, &hi);
+  std::printf("%d patches; D^t vs truth over the chart: correlation %.3f; D in [%.3f, %.3f] mm, truth min %.3f; "
+              "%.2f ms\n",
+              r.layout().num_patches(), corr, lo, hi, -0.5 * 0.18, timing.total_ms());
+  EXPECT_GT(corr, 0.5);
+  EXPECT_LT(lo, -0.03);
+  // 0 outside the chart; finite everywhere.
+  const cv::Mat chart = Chart();
+  for (int y = 0; y < kS; ++y)
+    for (int x = 0; x < kS; ++x) {
+      ASSERT_TRUE(std::isfinite(D.at<float>(y, x)));
+      if (!chart.at<uint8_t>(y, x)) {
+        ASSERT_EQ(D.at<float>(y, x), 0.0f);
+      }
+    }
+}
+
+TEST(DetailRegression, SameBytesForAnyThreadCountAndCall) {
+  const DetailRegressor r = FixedRegressor();
+  cv::Mat t, truth;
+  Frame(0.2, &t, &truth);
+  cv::Mat seen(kS, kS, CV_8U, cv::Scalar(255));
+  seen(cv::Rect(0, 70, 60, 58)).setTo(0);  // some patches dropped
+  cv::Mat one, two, again;
+  {
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+    one = r.Regress(t, seen);
+  }
+  {
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, 2);
+    two = r.Regress(t, seen);
+    again = r.Regress(t, seen);
+  }
+  EXPECT_EQ(std::memcmp(one.data, two.data, one.total() * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(two.data, again.data, two.total() * sizeof(float)), 0);
+}
+
+TEST(DetailRegression, UnseenPatchesAreDroppedAndLeaveNoGroove) {
+  const DetailRegressor r = FixedRegressor();
+  cv::Mat t, truth;
+  Frame(0.2, &t, &truth);
+  // The lower-left line (40, 90) is occluded: its texels are unseen (and 0 in T^t).
+  cv::Mat seen(kS, kS, CV_8U, cv::Scalar(255));
+  const cv::Rect occluded(0, 66, 62, 62);
+  seen(occluded).setTo(0);
+  t.setTo(0.0f, seen == 0);
+  DetailTiming timing;
+  const cv::Mat D = r.Regress(t, seen, &timing);
+  EXPECT_GT(timing.dropped, 0);
+  double lo, hi;
+  cv::minMaxLoc(D(cv::Rect(10, 76, 42, 42)), &lo, &hi);
+  std::printf("%d of %d patches dropped; D in the occluded square: [%.4f, %.4f] mm\n", timing.dropped,
+              timing.patches, lo, hi);
+  EXPECT_GT(lo, -0.02);  // no groove where nothing was seen (the fill only)
+  // The seen lines keep their grooves.
+  EXPECT_GT(Correlation(D, truth, Chart() & (seen != 0)), 0.5);
+}
+
+// Steps 1–4 against a reference built from the training blocks directly: on every
+// covered texel D^t is the bilinear-weighted average of the reconstructed patches
+// that did not drop out (Splat of the kept patches over Splat of their indicator).
+TEST(DetailRegression, MergeAveragesTheKeptPatches) {
+  const DetailRegressor r = FixedRegressor();
+  cv::Mat t, truth;
+  Frame(0.2, &t, &truth);
+  cv::Mat seen(kS, kS, CV_8U, cv::Scalar(255));
+  seen(cv::Rect(0, 66, 62, 62)).setTo(0);
+  t.setTo(0.0f, seen == 0);
+  const cv::Mat D = r.Regress(t, seen);
+  const std::vector<uint8_t> drop = r.DroppedPatches(t, seen);
+  const PatchSampler sampler(r.layout());
+  const int N = sampler.num_patches(), n = sampler.patch_size() * sampler.patch_size();
+  ASSERT_EQ(static_cast<int>(drop.size()), N);
+  const DetailModel& model = TinyModel();
+  const Eigen::MatrixXf c = model.cascade.PredictMatrix(sampler.Sample(t));  // Eq. 6
+  Eigen::MatrixXf d = (c * model.pca.basis.transpose()).rowwise() + model.pca.mean.transpose();
+  Eigen::MatrixXf kept = Eigen::MatrixXf::Ones(N, n);
+  int dropped = 0;
+  for (int k = 0; k < N; ++k)
+    if (drop[k]) {
+      d.row(k).setZero();
+      kept.row(k).setZero();
+      ++dropped;
+    }
+  ASSERT_GT(dropped, 0);
+  ASSERT_LT(dropped, N);
+  const cv::Mat num = sampler.Splat(d), share = sampler.Splat(kept);
+  double worst = 0.0;
+  int compared = 0;
+  for (int y = 0; y < kS; ++y)
+    for (int x = 0; x < kS; ++x) {
+      if (sampler.splat_weight().at<float>(y, x) <= 0.0f || !Chart().at<uint8_t>(y, x)) continue;
+      const float s = share.at<float>(y, x);
+      const double ref = s > 1e-4f ? num.at<float>(y, x) / s : 0.0;
+      worst = std::max(worst, std::abs(ref - D.at<float>(y, x)));
+      ++compared;
+    }
+  std::printf("%d of %d patches dropped; merge vs reference over %d texels: max |diff| %.2e mm\n", dropped, N,
+              compared, worst);
+  EXPECT_LT(worst, 1e-5);
+}
+
+TEST(DetailRegression, GateLeavesAFrameWithoutLinesFlat) {
+  DetailRegressionOptions o = SmallOptions();
+  o.gate_by_response = true;
+  const DetailRegressor gated = FixedRegressor(o);
+  const DetailRegressor plain = FixedRegressor();
+  cv::Mat flat, truth;
+  Frame(0.0, &flat, &truth);
+  DetailTiming tg;
+  const cv::Mat Dg = gated.Regress(flat, cv::Mat(), &tg);
+  const cv::Mat Dp = plain.Regress(flat, cv::Mat());
+  EXPECT_EQ(tg.dropped, tg.patches);
+  EXPECT_EQ(cv::countNonZero(Dg != 0), 0);
+  std::printf("flat frame: max |D| %.4f mm without the gate, %.4f with it\n", cv::norm(Dp, cv::NORM_INF),
+              cv::norm(Dg, cv::NORM_INF));
+  // With lines the gate keeps the patches on them.
+  cv::Mat t;
+  Frame(0.2, &t, &truth);
+  DetailTiming tl;
+  const cv::Mat D = gated.Regress(t, cv::Mat(), &tl);
+  EXPECT_LT(tl.dropped, tl.patches / 2);
+  EXPECT_GT(Correlation(D, truth, Chart()), 0.5);
+}
+
+TEST(DetailRegression, WrinkleMapIgnoresOcclusionBorders) {
+  // Frames with no lines; in two of them one half of the chart is unseen (0 in T^t).
+  // Every texel is seen in at least 3 of 4 frames, so only the extension of the seen
+  // texels keeps the occlusion borders from reading as dark lines (no patches).
+  DetailRegressor r(TinyModel(), {}, Chart(), SmallOptions());
+  cv::Mat t, d;
+  Frame(0.0, &t, &d);
+  for (int i = 0; i < 4; ++i) {
+    cv::Mat seen(kS, kS, CV_8U, cv::Scalar(255));
+    if (i == 0) seen(cv::Rect(0, 0, 64, 128)).setTo(0);
+    if (i == 1) seen(cv::Rect(64, 0, 64, 128)).setTo(0);
+    cv::Mat ti = t.clone();
+    ti.setTo(0.0f, seen == 0);
+    r.AddWrinkleFrame(ti, seen);
+  }
+  r.FixLayout();
+  double w_max;
+  cv::minMaxLoc(r.wrinkle_map().probability, nullptr, &w_max);
+  std::printf("occlusion borders: max W %.5f, %d patches\n", w_max, r.layout().num_patches());
+  EXPECT_EQ(r.layout().num_patches(), 0);
+  EXPECT_EQ(cv::countNonZero(r.Regress(t, cv::Mat()) != 0), 0);
+}
+
+TEST(DetailRegression, MisuseIsAClearError) {
+  DetailRegressor r(TinyModel(), {}, Chart(), SmallOptions());
+  cv::Mat t, d;
+  Frame(0.1, &t, &d);
+  EXPECT_ERROR_HAS(r.Regress(t, cv::Mat()), "layout is not fixed");
+  EXPECT_ERROR_HAS(r.FixLayout(), "no wrinkle frames");
+  EXPECT_ERROR_HAS(r.AddWrinkleFrame(cv::Mat(64, 64, CV_32F, cv::Scalar(0)), cv::Mat()), "expected 128x128");
+  EXPECT_ERROR_HAS(r.AddWrinkleFrame(cv::Mat(kS, kS, CV_8U, cv::Scalar(0)), cv::Mat()), "CV_32FC1");
+  EXPECT_ERROR_HAS(r.AddWrinkleFrame(t, cv::Mat(kS, kS, CV_32F, cv::Scalar(0))), "seen mask must be CV_8UC1");
+  r.AddWrinkleFrame(t, cv::Mat());
+  EXPECT_TRUE(r.NeedsWrinkleFrames());
+  r.FixLayout();
+  EXPECT_ERROR_HAS(r.AddWrinkleFrame(t, cv::Mat()), "already fixed");
+  EXPECT_ERROR_HAS(r.FixLayout(), "already fixed");
+  EXPECT_ERROR_HAS(DetailRegressor(TinyModel(), {}, cv::Mat(64, 64, CV_8U, cv::Scalar(255)), SmallOptions()),
+                   "coverage is 64x64, expected 128x128");
+  DetailRegressionOptions bad = SmallOptions();
+  bad.wrinkle_frames = 0;
+  EXPECT_ERROR_HAS(DetailRegressor(TinyModel(), {}, Chart(), bad), "wrinkle_frames");
+  DetailModel regions = TinyModel();
+  regions.wrinkle.patch_regions = {"forehead"};
+  EXPECT_ERROR_HAS(DetailRegressor(regions, {}, Chart(), SmallOptions()), "unknown region 'forehead'");
+}
+
+}  // namespace
+}  // namespace crease
