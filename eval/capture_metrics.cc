@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/camera.h"
 #include "core/error.h"
@@ -84,11 +85,18 @@ double MeanDistance(const MatX3d& a, const MatX3d& b, const std::vector<int>& id
   return ids.empty() ? 0.0 : s / ids.size();
 }
 
-cv::Mat ReadMap(const fs::path& path, int R) {
+// A float map of R×R texels. `resample`: a square map of another size is resampled
+// to R (the studio writes its truth at its own resolution, the model may use another).
+cv::Mat ReadMap(const fs::path& path, int R, bool resample = false) {
   Require(fs::is_regular_file(path), fmt::format("{}: missing", path.string()));
   cv::Mat m = ReadImage(path, /*srgb=*/false);
   if (m.channels() > 1) cv::extractChannel(m, m, 0);
   if (m.depth() != CV_32F) m.convertTo(m, CV_32F);
+  if (resample && m.rows == m.cols && m.rows != R && m.rows > 0) {
+    cv::Mat r;
+    cv::resize(m, r, cv::Size(R, R), 0, 0, m.rows > R ? cv::INTER_AREA : cv::INTER_LINEAR);
+    m = r;
+  }
   Require(m.rows == R && m.cols == R,
           fmt::format("{}: the map is {}×{}, expected {}×{}", path.string(), m.cols, m.rows, R, R));
   return m;
@@ -293,7 +301,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     cv::Mat D;
     if (fs::is_regular_file(d_path)) {
       D = ReadMap(d_path, R);
-      const cv::Mat G = ReadMap(TruthMapPath(dataset, info, index), R);
+      const cv::Mat G = ReadMap(TruthMapPath(dataset, info, index), R, /*resample=*/true);
       e.has_displacement = true;
       e.d_face = CompareMaps(D, G, coverage);
       e.d_wrinkle = CompareMaps(D, G, wrinkle_mask);

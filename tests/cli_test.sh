@@ -89,6 +89,22 @@ bad "unknown training option" "unknown option 'ferns'" "$crease" train --scans "
 bad "bad training option" "num_ferns" "$crease" train --scans "$tmp/scans" --out "$tmp/m2.cdm" --set num_ferns=0
 bad "unknown training light" "light 'disco'" "$crease" train --scans "$tmp/scans" --out "$tmp/m2.cdm" --set training_lights=disco
 [ ! -e "$tmp/m2.cdm" ] || { echo "FAIL: model written despite an error"; fails=$((fails+1)); }
+# Online capture (issue 6) on the 2-frame sequence with the tiny model, then its metrics.
+ok "capture" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-prior --set wrinkle_frames=2 --set hifi_mesh_resolution=64 --preview "$tmp/cap.avi" -o "$tmp/cap"
+for f in capture.json rig.crig timings.csv frames/000031.json frames/000031.cfr displacement/000031.exr maps/mesoscopic.exr maps/wrinkle_map.png meshes/hifi/000030.ply hifi.pvd refined.pvd previews/000030.png; do
+  [ -s "$tmp/cap/$f" ] || { echo "FAIL: capture did not write $f"; fails=$((fails+1)); }
+done
+ok "eval" "$crease" eval --capture "$tmp/cap" --dataset "$tmp/seq" --set surface_every=1 --set surface_mesh_resolution=64
+grep -q "refined L~^t" "$tmp/cap/eval.md" && grep -q '"coarse_px"' "$tmp/cap/eval.json" && [ -s "$tmp/cap/eval_frames.csv" ] \
+  || { echo "FAIL: eval wrote no metrics"; fails=$((fails+1)); }
+bad "capture exists" "already exists" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-prior -o "$tmp/cap"
+bad "capture missing model" "m3.cdm" "$crease" capture -i "$tmp/seq" --model "$tmp/m3.cdm" -o "$tmp/cap2"
+bad "capture model of another kind" "detail model" "$crease" capture -i "$tmp/seq" --model "$tmp/actor.json" -o "$tmp/cap2"
+bad "capture missing input" "does not exist" "$crease" capture -i "$tmp/nothing.mp4" --model "$tmp/model.cdm" --rig "$tmp/head.crig" -o "$tmp/cap2"
+bad "capture unknown option" "unknown option 'ferns'" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --set ferns=2 -o "$tmp/cap2"
+[ ! -e "$tmp/cap2" ] || { echo "FAIL: capture folder written despite an error"; fails=$((fails+1)); }
+bad "eval not a capture" "capture.json" "$crease" eval --capture "$tmp/seq" --dataset "$tmp/seq"
+bad "eval not a dataset" "dataset.json" "$crease" eval --capture "$tmp/cap" --dataset "$tmp/scans"
 
 bad "missing mesh" "nope.ply: file does not exist" "$crease" mesh info "$tmp/nope.ply"
 printf 'ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n' > "$tmp/badidx.ply"
