@@ -191,7 +191,8 @@ void AddCaptureCommands(CLI::App& app) {
         }
         j["timing_ms"] = {{"landmarks", ct.landmarks_ms}, {"fit", ct.fit_ms},          {"visibility", ct.visibility_ms},
                           {"refine", ct.refine_ms},       {"texture", ct.texture_ms},  {"mesoscopic", ct.mesoscopic_ms},
-                          {"detail", ct.detail_ms},       {"hifi", ct.hifi_ms},        {"total", ct.total_ms()}};
+                          {"detail", ct.detail_ms},       {"hifi", ct.hifi_ms},        {"wrinkle_map", ct.wrinkle_map_ms},
+                          {"total", ct.total_ms()}};
         WriteJsonFile(dir / "frames" / fmt::format("{:06d}.json", f.frame), j);
         CaptureFrameArrays arrays;
         arrays.frame = f.frame;
@@ -212,6 +213,8 @@ void AddCaptureCommands(CLI::App& app) {
           timing.Add("texture T^t", ct.texture_ms / 1e3);
           timing.Add("detail regression (Sec. 5.2)", ct.detail_ms / 1e3);
           timing.Add("H^t (Sec. 5.3)", ct.hifi_ms / 1e3);
+          if (ct.wrinkle_map_ms > 0) timing.Add("once: wrinkle map (first N frames)", ct.wrinkle_map_ms / 1e3);
+          if (ct.mesoscopic_ms > 0) timing.Add("once: mesoscopic map (first frame)", ct.mesoscopic_ms / 1e3);
           if (!t.detected && ct.mesoscopic_ms == 0) {  // steady state: no detection, not the first frame
             ++steady;
             steady_total += ct.total_ms();

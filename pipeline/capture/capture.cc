@@ -92,18 +92,23 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
   if (tracked.tracked) {
     out.coarse = CameraVertices(rig_, identity, tracked.fit);
     if (refiner_) {
+      // Visibility of the flow points: from the previous frame's depth buffer of
+      // L~^{t−1} (the texture's, free) while tracking continues; a depth buffer of
+      // L^t on the first frame and after a loss.
       auto t0 = std::chrono::steady_clock::now();
-      const std::vector<uint8_t> visible = texture_->VisibleVertices(out.coarse);
+      if (!was_tracked_ || previous_visible_.size() != static_cast<size_t>(rig_.num_vertices())) {
+        previous_visible_ = texture_->VisibleVertices(out.coarse);
+      }
       out.timing.visibility_ms = MsSince(t0);
       t0 = std::chrono::steady_clock::now();
-      out.refinement = refiner_->Refine(ToGray8(frame), tracked, identity, visible);
+      out.refinement = refiner_->Refine(ToGray8(frame), tracked, identity, previous_visible_);
       out.timing.refine_ms = MsSince(t0);
       out.refined = out.refinement.vertices.rows() == out.coarse.rows() ? out.refinement.vertices : out.coarse;
     } else {
       out.refined = out.coarse;
     }
     auto t0 = std::chrono::steady_clock::now();
-    out.texture = texture_->Extract(out.refined, frame);
+    texture_->Extract(out.refined, frame, &out.texture, &previous_visible_);
     out.timing.texture_ms = MsSince(t0);
     out.has_mesh = true;
     if (mesoscopic_.empty()) {
@@ -118,6 +123,7 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
   } else if (refiner_) {
     refiner_->Reset();
   }
+  was_tracked_ = tracked.tracked;
 
   std::vector<CapturedFrame> done;
   if (detail_->layout_fixed()) {
@@ -128,7 +134,7 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
   if (out.has_mesh) {
     const auto t0 = std::chrono::steady_clock::now();
     detail_->AddWrinkleFrame(out.texture.gray, out.texture.seen);
-    out.timing.detail_ms += MsSince(t0);
+    out.timing.wrinkle_map_ms = MsSince(t0);
   }
   pending_.push_back(std::move(out));
   if (detail_->frames_added() >= options_.detail.wrinkle_frames) done = Flush();

@@ -2,7 +2,7 @@
 // high-fidelity mesh H^t, one frame at a time.
 //
 //   frame I^t ──► global tracker (tracker.h; done by the caller) ──► L^t, landmarks
-//             ──► visibility of L^t (depth buffer, frame_texture.h)
+//             ──► visibility (the previous frame's depth buffer, frame_texture.h)
 //             ──► flow refinement (Sec. 5.1, flow_refinement.h) ──► L~^t
 //             ──► texture T^t in the rig's UV layout (frame_texture.h)
 //             ──► [first frame] mesoscopic map D^HF (Sec. 5.3)
@@ -82,6 +82,9 @@ struct CaptureTiming {
   double visibility_ms = 0, refine_ms = 0, texture_ms = 0, mesoscopic_ms = 0;
   double detail_ms = 0, hifi_ms = 0;
   DetailTiming detail;  // its sub-steps
+  // Adding the frame's texture to the wrinkle map (the first N frames only; a
+  // one-off cost like the mesoscopic map, not part of the per-frame totals below).
+  double wrinkle_map_ms = 0;
   double tracking_ms() const { return landmarks_ms + fit_ms + visibility_ms + refine_ms; }
   double detail_total_ms() const { return texture_ms + mesoscopic_ms + detail_ms + hifi_ms; }
   double total_ms() const { return tracking_ms() + detail_total_ms(); }
@@ -154,6 +157,7 @@ class CaptureSession {
   TriMesh hifi_scratch_;
   std::deque<CapturedFrame> pending_;  // frames waiting for the layout
   bool was_tracked_ = false;
+  std::vector<uint8_t> previous_visible_;  // per rig vertex, from the last texture's depth buffer
 };
 
 }  // namespace crease
