@@ -177,7 +177,13 @@ void CaptureSession::RegressAndFinish(CapturedFrame* frame) {
   frame->timing.detail_ms += MsSince(t0);
   if (options_.build_hifi_mesh) {
     t0 = std::chrono::steady_clock::now();
-    hifi_->BuildInto(frame->refined, CombinedDisplacement(*frame), &hifi_scratch_);
+    // D^t + D^HF into a reused buffer (no 4 MB allocation per frame).
+    if (mesoscopic_.empty()) {
+      frame->displacement.copyTo(combined_scratch_);
+    } else {
+      cv::add(frame->displacement, mesoscopic_, combined_scratch_);
+    }
+    hifi_->BuildInto(frame->refined, combined_scratch_, &hifi_scratch_);
     frame->timing.hifi_ms = MsSince(t0);
   }
 }

@@ -155,6 +155,7 @@ class CaptureSession {
   std::unique_ptr<HifiMeshBuilder> hifi_;
   cv::Mat mesoscopic_;
   TriMesh hifi_scratch_;
+  cv::Mat combined_scratch_;  // D^t + D^HF of the frame being finished
   std::deque<CapturedFrame> pending_;  // frames waiting for the layout
   bool was_tracked_ = false;
   std::vector<uint8_t> previous_visible_;  // per rig vertex, from the last texture's depth buffer
