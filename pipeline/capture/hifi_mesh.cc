@@ -100,21 +100,21 @@ HifiMeshBuilder::HifiMeshBuilder(const FaceRig& rig, const HifiMeshOptions& opti
   // are opened slightly in UV. Boundary edges are bucketed by grid cell (CSR).
   std::vector<std::array<Eigen::Vector2d, 2>> boundary;  // in grid coordinates X = u·N − 0.5
   {
-    std::vector<std::array<int, 3>> edges;  // (min vertex, max vertex, count placeholder)
+    std::vector<std::pair<int, int>> edges;  // (min vertex, max vertex) of every triangle edge
     edges.reserve(static_cast<size_t>(chart.F.rows()) * 3);
     for (int f = 0; f < chart.F.rows(); ++f) {
       for (int k = 0; k < 3; ++k) {
         const int a = chart.F(f, k), b = chart.F(f, (k + 1) % 3);
-        edges.push_back({std::min(a, b), std::max(a, b), 0});
+        edges.emplace_back(std::min(a, b), std::max(a, b));
       }
     }
     std::sort(edges.begin(), edges.end());
     for (size_t i = 0; i < edges.size();) {
       size_t j = i;
-      while (j < edges.size() && edges[j][0] == edges[i][0] && edges[j][1] == edges[i][1]) ++j;
+      while (j < edges.size() && edges[j] == edges[i]) ++j;
       if (j - i == 1) {
         auto grid = [&](int v) { return Eigen::Vector2d(chart.UV(v, 0) * m.N - 0.5, chart.UV(v, 1) * m.N - 0.5); };
-        boundary.push_back({grid(edges[i][0]), grid(edges[i][1])});
+        boundary.push_back({grid(edges[i].first), grid(edges[i].second)});
       }
       i = j;
     }
