@@ -68,63 +68,51 @@ struct MeshSeries {
 
 void AddCaptureCommands(CLI::App& app) {
   auto* cmd = app.add_subcommand("capture", "Online capture (paper Sec. 5): L^t, refined L~^t, D^t and H^t per frame");
-  static std::string input, model_path, rig_path, landmarks = "dlib", tracker_model, camera_path, out, preview, config;
-  static double fov = 50.0, noise = 0.0;
-  static int max_frames = -1, mesh_every = 1;
-  static bool no_meshes = false, no_maps = false, write_textures = false, gt_prior = false, overwrite = false;
-  static uint64_t seed = 1;
+  static TrackingFlags tf;
+  static std::string model_path, out, preview, config;
+  static int mesh_every = 1;
+  static bool no_meshes = false, no_maps = false, write_textures = false, overwrite = false;
   static std::vector<std::string> sets;
-  cmd->add_option("--input,-i", input, "Video file, image folder or crease sequence dataset")->required();
+  AddTrackingFlags(cmd, &tf);
   cmd->add_option("--model,-m", model_path, "Detail model (.cdm, from `crease train`)")->required();
-  cmd->add_option("--rig", rig_path, "Rig (.crig); default: the dataset's rig.crig");
-  cmd->add_option("--landmarks", landmarks, "Landmark source: dlib or regressor")->capture_default_str();
-  cmd->add_option("--tracker", tracker_model, "Regressor model (from `crease train-tracker`); implies --landmarks regressor");
-  cmd->add_option("--camera", camera_path, "Camera JSON (intrinsics); default: the dataset's, else --fov");
-  cmd->add_option("--fov", fov, "Horizontal field of view, degrees, when there is no calibration")->capture_default_str();
   cmd->add_option("--out,-o", out, "Output folder (written under a temporary name, renamed when complete)")->required();
   cmd->add_option("--preview", preview, "Preview video (.avi: MJPG, .mp4: mp4v): the frame with L~^t beside D^t");
-  cmd->add_option("--max-frames", max_frames, "Stop after this many frames");
   cmd->add_option("--mesh-every", mesh_every, "Write the meshes of every N-th frame")->capture_default_str();
   cmd->add_flag("--no-meshes", no_meshes, "Skip the per-frame PLY/VTP meshes");
   cmd->add_flag("--textures", write_textures, "Also write every frame's texture T^t (textures/NNNNNN.png, sRGB gray)");
   cmd->add_flag("--no-maps", no_maps, "Skip the per-frame displacement maps D^t (EXR)");
-  cmd->add_flag("--ground-truth-prior", gt_prior,
-                "Experimental control: track with the dataset's ground-truth landmarks (+ --noise), to isolate "
-                "later stages; never a default");
-  cmd->add_option("--noise", noise, "Ground-truth-prior landmark noise, px (σ)")->capture_default_str();
-  cmd->add_option("--seed", seed, "Seed of the ground-truth-prior noise")->capture_default_str();
   cmd->add_option("--config", config, "YAML of capture options (pipeline/capture/capture.h CaptureOptions)");
   cmd->add_option("--set", sets, "Capture option KEY=VALUE (repeatable), e.g. wrinkle_frames=20 refine=false");
   cmd->add_flag("--overwrite", overwrite, "Replace an existing output folder");
   cmd->callback([] {
     CaptureOptions options;
-    options.tracker.landmark_source = tracker_model.empty() ? landmarks : "regressor";
-    options.tracker.tracker_model = tracker_model;
+    options.tracker.landmark_source = tf.tracker_model.empty() ? tf.landmarks : "regressor";
+    options.tracker.tracker_model = tf.tracker_model;
     if (!config.empty()) SetOptionsFromYaml(ReadFileToString(config), config, &options);
     if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &options);
     options.Check();
     Require(mesh_every >= 1, "--mesh-every must be at least 1");
-    auto frames = OpenFrameSource(input);
+    auto frames = OpenFrameSource(tf.input);
     const FrameSourceInfo& info = frames->info();
     const bool dataset = info.kind == "dataset";
-    if (rig_path.empty()) {
+    if (tf.rig_path.empty()) {
       Require(dataset, "--rig is required unless the input is a crease dataset");
-      rig_path = (info.path / "rig.crig").string();
+      tf.rig_path = (info.path / "rig.crig").string();
     }
-    const CameraIntrinsics K = ResolveIntrinsics(camera_path, info, fov);
+    const CameraIntrinsics K = ResolveIntrinsics(tf.camera_path, info, tf.fov);
     const DetailModel model = ReadDetailModel(model_path);
     auto t0 = std::chrono::steady_clock::now();
-    const FaceRig rig = CompatibleRig(ReadRig(rig_path), model);
+    const FaceRig rig = CompatibleRig(ReadRig(tf.rig_path), model);
     const double rig_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::printf("rig made compatible with the model's lowpass (Sec. 4.1) in %.1f s\n", rig_s);
     t0 = std::chrono::steady_clock::now();
-    FrameTracker tracker(rig, K, options.tracker, gt_prior, noise, seed, dataset ? info.path : fs::path());
+    FrameTracker tracker(rig, K, options.tracker, tf.gt_prior, tf.noise, tf.seed, dataset ? info.path : fs::path());
     CaptureSession session(rig, model, K, options);
     const double setup_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::printf("capture set up (UV raster, geodesics, stencils) in %.1f s\n", setup_s);
 
     const MatX3i face_F = FaceChartTriangles(rig);
-    const int total = max_frames > 0 && (info.frame_count < 0 || max_frames < info.frame_count) ? max_frames
+    const int total = tf.max_frames > 0 && (info.frame_count < 0 || tf.max_frames < info.frame_count) ? tf.max_frames
                                                                                                : info.frame_count;
     WriteFolderAtomic(out, overwrite, [&](const fs::path& dir) {
       fs::create_directories(dir / "frames");
@@ -267,7 +255,7 @@ void AddCaptureCommands(CLI::App& app) {
 
       Progress progress("capturing", std::max(total, 1));
       cv::Mat frame;
-      while ((max_frames < 0 || n < max_frames) && frames->Next(&frame)) {
+      while ((tf.max_frames < 0 || n < tf.max_frames) && frames->Next(&frame)) {
         const int index = frames->index();
         const TrackedFrame t = tracker.Track(frame, index);
         if (writer.isOpened()) pending_images[index] = frame.clone();
@@ -277,7 +265,7 @@ void AddCaptureCommands(CLI::App& app) {
       }
       for (const CapturedFrame& f : session.Flush()) emit(f);
       progress.Finish();
-      Require(n > 0, fmt::format("{}: no frames", input));
+      Require(n > 0, fmt::format("{}: no frames", tf.input));
 
       // Per-actor maps of the session.
       if (!session.mesoscopic().empty()) WriteImage(dir / "maps" / "mesoscopic.exr", session.mesoscopic());
@@ -288,10 +276,10 @@ void AddCaptureCommands(CLI::App& app) {
       }
       WriteFileAtomic(dir / "timings.csv", [&](std::ostream& o) { o << csv; });
       json summary;
-      summary["input"] = input;
+      summary["input"] = tf.input;
       summary["model"] = model_path;
       summary["rig"] = "rig.crig";
-      summary["source_rig"] = rig_path;
+      summary["source_rig"] = tf.rig_path;
       summary["landmark_source"] = tracker.source_name();
       summary["frames"] = n;
       summary["frame_indices"] = indices;

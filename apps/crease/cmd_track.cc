@@ -29,45 +29,32 @@ using nlohmann::json;
 
 void AddTrackCommand(CLI::App& app) {
   auto* cmd = app.add_subcommand("track", "Global face tracker: landmarks and the rig fitted per frame (issue 5)");
-  static std::string input, rig_path, landmarks = "dlib", tracker_model, camera_path, out, preview;
-  static double fov = 50.0, noise = 0.0;
-  static int max_frames = -1;
-  static bool no_meshes = false, gt_prior = false;
-  static uint64_t seed = 1;
+  static TrackingFlags tf;
+  static std::string out, preview;
+  static bool no_meshes = false;
   static std::vector<std::string> sets;
-  cmd->add_option("--input,-i", input, "Video file, image folder or crease sequence dataset")->required();
-  cmd->add_option("--rig", rig_path, "Rig (.crig); default: the dataset's rig.crig");
-  cmd->add_option("--landmarks", landmarks, "Landmark source: dlib or regressor")->capture_default_str();
-  cmd->add_option("--tracker", tracker_model, "Regressor model (from `crease train-tracker`)");
-  cmd->add_option("--camera", camera_path, "Camera JSON (intrinsics); default: the dataset's, else --fov");
-  cmd->add_option("--fov", fov, "Horizontal field of view, degrees, when there is no calibration")->capture_default_str();
+  AddTrackingFlags(cmd, &tf);
   cmd->add_option("--out,-o", out, "Output folder")->required();
   cmd->add_option("--preview", preview, "Preview video (.avi: MJPG, .mp4: mp4v) with landmarks and mesh");
-  cmd->add_option("--max-frames", max_frames, "Stop after this many frames");
   cmd->add_flag("--no-meshes", no_meshes, "Skip the per-frame PLY/VTP meshes");
-  cmd->add_flag("--ground-truth-prior", gt_prior,
-                "Experimental control: fit the rig to the dataset's ground-truth landmarks (+ --noise), "
-                "to isolate later stages; never a default");
-  cmd->add_option("--noise", noise, "Ground-truth-prior landmark noise, px (σ)")->capture_default_str();
-  cmd->add_option("--seed", seed, "Seed of the ground-truth-prior noise")->capture_default_str();
   cmd->add_option("--set", sets, "Tracker option KEY=VALUE (repeatable; pipeline/capture/tracker.h TrackerOptions)");
   cmd->callback([] {
     TrackerOptions options;
-    options.landmark_source = landmarks;
-    options.tracker_model = tracker_model;
+    options.landmark_source = tf.tracker_model.empty() ? tf.landmarks : "regressor";
+    options.tracker_model = tf.tracker_model;
     if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &options);
     options.Check();
-    auto frames = OpenFrameSource(input);
+    auto frames = OpenFrameSource(tf.input);
     const FrameSourceInfo& info = frames->info();
     const bool dataset = info.kind == "dataset";
-    if (rig_path.empty()) {
+    if (tf.rig_path.empty()) {
       Require(dataset, "--rig is required unless the input is a crease dataset");
-      rig_path = (info.path / "rig.crig").string();
+      tf.rig_path = (info.path / "rig.crig").string();
     }
-    const FaceRig rig = ReadRig(rig_path);
-    const CameraIntrinsics K = ResolveIntrinsics(camera_path, info, fov);
-    Require(!gt_prior || dataset, "--ground-truth-prior needs a crease sequence dataset as input");
-    FrameTracker tracker(rig, K, options, gt_prior, noise, seed, dataset ? info.path : fs::path());
+    const FaceRig rig = ReadRig(tf.rig_path);
+    const CameraIntrinsics K = ResolveIntrinsics(tf.camera_path, info, tf.fov);
+    Require(!tf.gt_prior || dataset, "--ground-truth-prior needs a crease sequence dataset as input");
+    FrameTracker tracker(rig, K, options, tf.gt_prior, tf.noise, tf.seed, dataset ? info.path : fs::path());
     const LandmarkRigFitter& fitter = tracker.fitter();
 
     const fs::path dir(out);
@@ -82,7 +69,7 @@ void AddTrackCommand(CLI::App& app) {
       Require(writer.isOpened(), fmt::format("{}: cannot write this video (try .avi)", preview));
     }
     const MatX3i face_F = FaceChartTriangles(rig);
-    const int total = max_frames > 0 && (info.frame_count < 0 || max_frames < info.frame_count) ? max_frames : info.frame_count;
+    const int total = tf.max_frames > 0 && (info.frame_count < 0 || tf.max_frames < info.frame_count) ? tf.max_frames : info.frame_count;
     Progress progress("tracking", std::max(total, 1));
     cv::Mat frame;
     int n = 0, tracked = 0, detections = 0, steady = 0;
@@ -90,7 +77,7 @@ void AddTrackCommand(CLI::App& app) {
     double err_lm = 0, err_lm_iod = 0, err_fit = 0, err_vertex = 0;
     int err_frames = 0;
     const bool has_truth = dataset && fs::is_directory(info.path / "truth");
-    while ((max_frames < 0 || n < max_frames) && frames->Next(&frame)) {
+    while ((tf.max_frames < 0 || n < tf.max_frames) && frames->Next(&frame)) {
       const TrackedFrame t = tracker.Track(frame, frames->index());
       ++n;
       tracked += t.tracked;
@@ -155,9 +142,9 @@ void AddTrackCommand(CLI::App& app) {
       progress.Advance();
     }
     progress.Finish();
-    Require(n > 0, fmt::format("{}: no frames", input));
+    Require(n > 0, fmt::format("{}: no frames", tf.input));
     json summary;
-    summary["input"] = input;
+    summary["input"] = tf.input;
     summary["landmark_source"] = tracker.source_name();
     summary["frames"] = n;
     summary["tracked_frames"] = tracked;

@@ -8,6 +8,7 @@
 #include <memory>
 #include <string>
 
+#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 #include <opencv2/core/mat.hpp>
 
@@ -18,6 +19,19 @@
 #include "pipeline/capture/tracker.h"
 
 namespace crease::app {
+
+// The input and global-tracker flags `crease track` and `crease capture` share.
+struct TrackingFlags {
+  std::string input, rig_path, landmarks = "dlib", tracker_model, camera_path;
+  double fov = 50.0;
+  int max_frames = -1;
+  bool gt_prior = false;  // the ground-truth-prior control
+  double noise = 0.0;     // its landmark noise, px
+  uint64_t seed = 1;      // its noise seed
+};
+// Adds --input, --rig, --landmarks, --tracker, --camera, --fov, --max-frames,
+// --ground-truth-prior, --noise and --seed to `cmd`.
+void AddTrackingFlags(CLI::App* cmd, TrackingFlags* flags);
 
 // The intrinsics of the frames: --camera (a camera JSON), else the dataset's
 // calibration, else a pinhole of `fov_deg` horizontal field of view. Throws Error
