@@ -21,6 +21,9 @@
 // with a misaligned truth; (c) H^t exists with finite vertices for every tracked
 // frame; (d) a lost frame in the middle gives a frame without mesh and the session
 // goes on.
+//
+// Measured (Release, this 2-vCPU machine): L^t 2.04 px → L~^t 0.99 px (frames with
+// flow 2.76 → 1.09 px); correlation of D^t with the true D 0.57; ~3.5 s in all.
 #include "pipeline/capture/capture.h"
 
 #include <gtest/gtest.h>
@@ -33,7 +36,7 @@
 #include <string>
 #include <vector>
 
-#include <opencv2/imgproc.hpp>
+#include <opencv2/core.hpp>
 
 #include "core/error.h"
 #include "core/rng.h"
@@ -93,12 +96,12 @@ struct Fixture {
     so.width = 320;
     so.height = 240;
     so.samples_per_axis = 1;
-    so.distance_mm = 330.0;  // the face ~170 px wide, the forehead inside the image
+    so.distance_mm = 330.0;  // the face ~150 px wide, the forehead inside the image
     studio = std::make_unique<Studio>(Rig(), actor, so);
     // A key light from 50° above (15° to the side) and weak ambient occlusion:
     // wrinkles across the forehead cast clear shading lines (under the soft
     // "studio" rig they barely show at this image size).
-    light = DirectionalRig(15.0, 50.0);  // a key light from above (and a little to the side)
+    light = DirectionalRig(15.0, 50.0);
   }
   StudioFrame Render(const Eigen::VectorXd& weights, const SequenceFrame& pose, uint64_t seed) const {
     return studio->RenderStill(weights, pose, &light, nullptr, seed);
@@ -109,7 +112,9 @@ struct Fixture {
 MatX3d TrueCamVertices(const StudioFrame& f) {
   const MatX3d& V = f.actor.coarse.V;
   MatX3d out(V.rows(), 3);
-  for (int v = 0; v < V.rows(); ++v) out.row(v) = (f.truth.cam_from_head * Eigen::Vector3d(V.row(v).transpose())).transpose();
+  for (int v = 0; v < V.rows(); ++v) {
+    out.row(v) = (f.truth.cam_from_head * Eigen::Vector3d(V.row(v).transpose())).transpose();
+  }
   return out;
 }
 
@@ -418,14 +423,19 @@ TEST(Capture, EndToEndOnAStudioSequence) {
               shifted.Correlation(), flipped_u.Correlation(), flipped_v.Correlation());
   std::printf("time: fixture + training %.1f s, rendering %.1f s, session setup %.2f s, capture %.2f s; total %.1f s\n",
               train_s, render_s, setup_s, capture_s, Seconds(t_start));
-  // (a) Measured 2.10 → 0.83 px over all frames, 2.85 → 0.89 px over the frames with flow.
+  // (a) Measured 2.04 → 0.99 px over all tracked frames, 2.76 → 1.09 px over the
+  // frames with flow (on the first frame of a run L^t is nearly the truth and the
+  // landmarks' 1 px noise makes L~^t a little worse: 0.6 → 0.8 px).
   EXPECT_LT(refined_px, coarse_px);
   EXPECT_EQ(flow_frames, 4);
   EXPECT_LT(refined_flow_px, 0.6 * coarse_flow_px);
-  // (b) Measured 0.52 (control shifted by 3 texels: 0.13; flipped in v: ~0).
+  // (b) Measured 0.57 (0.40–0.59 for actor seeds 3–8); the truth misaligned by 3
+  // texels gives 0.03, flipped in v 0.02, and flipped in u 0.47: this actor's
+  // wrinkles (horizontal forehead lines) are nearly mirror-symmetric, so a u flip
+  // is not what this check can see.
   EXPECT_GT(patches.Correlation(), 0.3);
-  EXPECT_LT(shifted.Correlation(), 0.5 * patches.Correlation());
-  EXPECT_LT(flipped_v.Correlation(), 0.5 * patches.Correlation());
+  EXPECT_LT(shifted.Correlation(), patches.Correlation() - 0.2);
+  EXPECT_LT(flipped_v.Correlation(), patches.Correlation() - 0.2);
 }
 
 }  // namespace
