@@ -48,6 +48,7 @@
 #include "pipeline/training/wrinkle_map.h"
 #include "synth/lights.h"
 #include "synth/studio.h"
+#include "tests/detail_model_test_util.h"
 #include "tests/synth_test_util.h"
 
 namespace crease {
@@ -160,19 +161,10 @@ DetailModel TrainTinyModel(const Fixture& fx, const CameraIntrinsics& K, int* tr
   std::vector<cv::Mat> responses;
   for (const cv::Mat& t : textures) responses.push_back(builder.Add(t));
   const PatchLayout layout = PlacePatches(builder.Finish(), m.patch);
-  const TrainingPatches pairs = ExtractTrainingPatches(layout, textures, responses, displacements, m.wrinkle);
-  *training_pairs = pairs.size();
-  PcaOptions po;
-  po.dimensions = 8;
-  m.pca = FitPatchPca(pairs.displacement, po);
-  FernOptions fo;
-  fo.num_ferns = 200;
-  fo.num_sampled_pixels = 30;
-  fo.shrinkage = 5;
-  m.cascade = TrainFernCascade(pairs.texture, m.pca.ProjectPatches(pairs.displacement), fo).cascade;
-  m.Validate("tiny capture model");
+  *training_pairs =
+      testing::FitTinyRegressor(layout, textures, responses, displacements, /*pca_dimensions=*/8, /*num_ferns=*/200, &m);
   std::printf("model: %zu training textures, %d patches, %d training pairs, PCA %d dimensions\n", textures.size(),
-              layout.num_patches(), pairs.size(), m.pca.dimensions());
+              layout.num_patches(), *training_pairs, m.pca.dimensions());
   return m;
 }
 

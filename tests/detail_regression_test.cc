@@ -18,6 +18,7 @@
 #include "pipeline/training/fern_cascade.h"
 #include "pipeline/training/pca.h"
 #include "tests/test_util.h"
+#include "tests/detail_model_test_util.h"
 #include "tests/wrinkle_test_util.h"
 
 namespace crease {
@@ -83,16 +84,8 @@ const DetailModel& TinyModel() {
     std::vector<cv::Mat> responses;
     const WrinkleMap wmap = ComputeWrinkleMap(textures, Chart(), {}, m.wrinkle, &responses);
     const PatchLayout layout = PlacePatches(wmap, m.patch);
-    const TrainingPatches pairs = ExtractTrainingPatches(layout, textures, responses, displacements, m.wrinkle);
-    PcaOptions po;
-    po.dimensions = 4;
-    m.pca = FitPatchPca(pairs.displacement, po);
-    FernOptions fo;
-    fo.num_ferns = 120;
-    fo.num_sampled_pixels = 30;
-    fo.shrinkage = 5;
-    m.cascade = TrainFernCascade(pairs.texture, m.pca.ProjectPatches(pairs.displacement), fo).cascade;
-    m.Validate("tiny model");
+    testing::FitTinyRegressor(layout, textures, responses, displacements, /*pca_dimensions=*/4, /*num_ferns=*/120,
+                              &m);
     return m;
   }();
   return model;

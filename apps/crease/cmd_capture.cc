@@ -52,13 +52,6 @@ cv::Mat DisplacementPicture(const cv::Mat& d, double scale_mm) {
   return out;
 }
 
-TriMesh WithVertices(const FaceRig& rig, const MatX3d& V) {
-  TriMesh m = rig.neutral;
-  m.V = V;
-  m.N.resize(0, 3);
-  return m;
-}
-
 struct MeshSeries {
   std::string name;
   std::unique_ptr<PvdWriter> pvd;
@@ -156,26 +149,13 @@ void AddCaptureCommands(CLI::App& app) {
         tracked_n += f.has_mesh;
         detail_n += f.has_detail;
         const CaptureTiming& ct = f.timing;
-        json j;
-        j["frame"] = f.frame;
-        j["tracked"] = t.tracked;
-        j["detected"] = t.detected;
-        j["confidence"] = t.confidence;
-        json lm = json::array();
-        for (int i = 0; i < t.landmarks.rows(); ++i) lm.push_back({t.landmarks(i, 0), t.landmarks(i, 1)});
-        j["landmarks"] = lm;
-        if (t.tracked) {
-          j["cam_from_head"] = PoseJson(t.fit.cam_from_head);
-          json w = json::object();
-          for (int e = 0; e < rig.num_expressions(); ++e) w[rig.expression_names[e]] = t.fit.expression[e];
-          j["expression"] = w;
-          if (f.refinement.vertices.rows() > 0) {
-            j["refinement"] = {{"trusted", f.refinement.trusted},
-                               {"recovered", f.refinement.recovered},
-                               {"reset", f.refinement.reset},
-                               {"invisible", f.refinement.invisible},
-                               {"cam_from_head", PoseJson(f.refinement.fit.cam_from_head)}};
-          }
+        json j = TrackedFrameJson(t, rig);
+        if (t.tracked && f.refinement.vertices.rows() > 0) {
+          j["refinement"] = {{"trusted", f.refinement.trusted},
+                             {"recovered", f.refinement.recovered},
+                             {"reset", f.refinement.reset},
+                             {"invisible", f.refinement.invisible},
+                             {"cam_from_head", PoseJson(f.refinement.fit.cam_from_head)}};
         }
         j["timing_ms"] = {{"landmarks", ct.landmarks_ms}, {"fit", ct.fit_ms},          {"visibility", ct.visibility_ms},
                           {"refine", ct.refine_ms},       {"texture", ct.texture_ms},  {"mesoscopic", ct.mesoscopic_ms},
@@ -219,8 +199,8 @@ void AddCaptureCommands(CLI::App& app) {
         if (f.has_mesh && !no_meshes && f.frame % mesh_every == 0) {
           const double time_s = f.frame / info.fps;
           const std::vector<std::pair<int, TriMesh>> meshes = {
-              {0, WithVertices(rig, f.coarse)},
-              {1, WithVertices(rig, f.refined)},
+              {0, RigMeshWithVertices(rig, f.coarse)},
+              {1, RigMeshWithVertices(rig, f.refined)},
               {2, session.HifiMesh(f)}};
           for (const auto& [k, mesh] : meshes) {
             const fs::path base = dir / "meshes" / series[k].name / fmt::format("{:06d}", f.frame);

@@ -88,30 +88,16 @@ void AddTrackCommand(CLI::App& app) {
         steady_ms += t.landmarks_ms + t.fit_ms;
         ++steady;
       }
-      json j;
-      j["frame"] = t.frame;
-      j["tracked"] = t.tracked;
-      j["detected"] = t.detected;
-      j["confidence"] = t.confidence;
-      json lm = json::array();
-      for (int i = 0; i < t.landmarks.rows(); ++i) lm.push_back({t.landmarks(i, 0), t.landmarks(i, 1)});
-      j["landmarks"] = lm;
+      json j = TrackedFrameJson(t, rig);
       j["landmarks_ms"] = t.landmarks_ms;
       j["fit_ms"] = t.fit_ms;
       MatX2d projected;
       if (t.tracked) {
-        j["cam_from_head"] = PoseJson(t.fit.cam_from_head);
-        json w = json::object();
-        for (int e = 0; e < rig.num_expressions(); ++e) w[rig.expression_names[e]] = t.fit.expression[e];
-        j["expression"] = w;
-        j["rms_px"] = t.fit.rms_px;
         const MatX3d V = fitter.HeadVertices(t.fit);
         const Camera cam(K, t.fit.cam_from_head);
         projected = cam.ProjectAll(V);
         if (!no_meshes) {
-          TriMesh mesh = rig.neutral;
-          mesh.V = V;
-          mesh.N.resize(0, 3);
+          const TriMesh mesh = RigMeshWithVertices(rig, V);
           WritePly(dir / "meshes" / fmt::format("{:06d}.ply", t.frame), mesh);
           const fs::path vtp = dir / "meshes" / fmt::format("{:06d}.vtp", t.frame);
           WriteVtp(vtp, mesh);

@@ -87,6 +87,32 @@ nlohmann::json PoseJson(const Rigid3d& p) {
           {"translation_mm", {p.translation.x(), p.translation.y(), p.translation.z()}}};
 }
 
+nlohmann::json TrackedFrameJson(const TrackedFrame& t, const FaceRig& rig) {
+  nlohmann::json j;
+  j["frame"] = t.frame;
+  j["tracked"] = t.tracked;
+  j["detected"] = t.detected;
+  j["confidence"] = t.confidence;
+  nlohmann::json lm = nlohmann::json::array();
+  for (int i = 0; i < t.landmarks.rows(); ++i) lm.push_back({t.landmarks(i, 0), t.landmarks(i, 1)});
+  j["landmarks"] = lm;
+  if (t.tracked) {
+    j["cam_from_head"] = PoseJson(t.fit.cam_from_head);
+    nlohmann::json w = nlohmann::json::object();
+    for (int e = 0; e < rig.num_expressions(); ++e) w[rig.expression_names[e]] = t.fit.expression[e];
+    j["expression"] = w;
+    j["rms_px"] = t.fit.rms_px;
+  }
+  return j;
+}
+
+TriMesh RigMeshWithVertices(const FaceRig& rig, const MatX3d& V) {
+  TriMesh m = rig.neutral;
+  m.V = V;
+  m.N.resize(0, 3);
+  return m;
+}
+
 cv::Mat PreviewBgr(const cv::Mat& linear_rgb) {
   cv::Mat bgr(linear_rgb.size(), CV_8UC3);
   for (int j = 0; j < linear_rgb.rows; ++j) {

@@ -61,6 +61,13 @@ class FrameTracker {
 
 nlohmann::json PoseJson(const Rigid3d& pose);
 
+// The per-frame record both commands write: frame, tracked, detected, confidence,
+// landmarks (px) and, when tracked, cam_from_head, expression weights by name and rms_px.
+nlohmann::json TrackedFrameJson(const TrackedFrame& t, const FaceRig& rig);
+
+// The rig's mesh (topology, UVs) with vertices V and no normals, for writing.
+TriMesh RigMeshWithVertices(const FaceRig& rig, const MatX3d& V);
+
 // Linear float RGB → 8-bit sRGB BGR (for previews).
 cv::Mat PreviewBgr(const cv::Mat& linear_rgb);
 // Draws the landmarks (green), a faint wireframe of `projected` (#V×2 px) over the

@@ -90,21 +90,29 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
   out.timing.landmarks_ms = tracked.landmarks_ms;
   out.timing.fit_ms = tracked.fit_ms;
   if (tracked.tracked) {
-    out.coarse = CameraVertices(rig_, identity, tracked.fit);
     if (refiner_) {
       // Visibility of the flow points: from the previous frame's depth buffer of
       // L~^{t−1} (the texture's, free) while tracking continues; a depth buffer of
-      // L^t on the first frame and after a loss.
+      // L^t on the first frame and after a loss. L^t itself is evaluated by the
+      // refiner (RefinedFrame::coarse_vertices); it is evaluated here only when
+      // the visibility needs it first.
       auto t0 = std::chrono::steady_clock::now();
       if (!was_tracked_ || previous_visible_.size() != static_cast<size_t>(rig_.num_vertices())) {
+        out.coarse = CameraVertices(rig_, identity, tracked.fit);
         previous_visible_ = texture_->VisibleVertices(out.coarse);
       }
       out.timing.visibility_ms = MsSince(t0);
       t0 = std::chrono::steady_clock::now();
       out.refinement = refiner_->Refine(ToGray8(frame), tracked, identity, previous_visible_);
       out.timing.refine_ms = MsSince(t0);
+      if (out.refinement.coarse_vertices.rows() == rig_.num_vertices()) {
+        out.coarse = out.refinement.coarse_vertices;
+      } else if (out.coarse.rows() != rig_.num_vertices()) {
+        out.coarse = CameraVertices(rig_, identity, tracked.fit);
+      }
       out.refined = out.refinement.vertices.rows() == out.coarse.rows() ? out.refinement.vertices : out.coarse;
     } else {
+      out.coarse = CameraVertices(rig_, identity, tracked.fit);
       out.refined = out.coarse;
     }
     auto t0 = std::chrono::steady_clock::now();
