@@ -153,7 +153,8 @@ void SetFromJson(const json& j, const std::string& what, void* options,
 }
 
 // YAML scalars carry no type; convert them the way a person reads them.
-json YamlToJson(const YAML::Node& node, const std::string& what) {
+template <class Json>
+Json YamlToJson(const YAML::Node& node, const std::string& what) {
   switch (node.Type()) {
     case YAML::NodeType::Null:
     case YAML::NodeType::Undefined:
@@ -177,17 +178,28 @@ json YamlToJson(const YAML::Node& node, const std::string& what) {
       return s;
     }
     case YAML::NodeType::Sequence: {
-      json a = json::array();
-      for (const auto& e : node) a.push_back(YamlToJson(e, what));
+      Json a = Json::array();
+      for (const auto& e : node) a.push_back(YamlToJson<Json>(e, what));
       return a;
     }
     case YAML::NodeType::Map: {
-      json o = json::object();
-      for (const auto& kv : node) o[kv.first.as<std::string>()] = YamlToJson(kv.second, what);
+      Json o = Json::object();
+      for (const auto& kv : node) o[kv.first.as<std::string>()] = YamlToJson<Json>(kv.second, what);
       return o;
     }
   }
   return nullptr;
+}
+
+template <class Json = json>
+Json LoadYaml(const std::string& yaml_text, const std::string& what) {
+  YAML::Node node;
+  try {
+    node = YAML::Load(yaml_text);
+  } catch (const YAML::Exception& e) {
+    throw Error(fmt::format("{}: malformed YAML: {}", what, e.what()));
+  }
+  return YamlToJson<Json>(node, what);
 }
 
 }  // namespace
@@ -205,15 +217,13 @@ void SetFieldsFromJsonText(const std::string& json_text, const std::string& what
 
 void SetFieldsFromYamlText(const std::string& yaml_text, const std::string& what, void* options,
                            void (*visit)(void*, OptionVisitor&)) {
-  YAML::Node node;
-  try {
-    node = YAML::Load(yaml_text);
-  } catch (const YAML::Exception& e) {
-    throw Error(fmt::format("{}: malformed YAML: {}", what, e.what()));
-  }
-  json j = YamlToJson(node, what);
+  json j = LoadYaml(yaml_text, what);
   if (j.is_null()) j = json::object();  // an empty document sets nothing
   SetFromJson(j, what, options, visit);
+}
+
+std::string YamlTextToJsonText(const std::string& yaml_text, const std::string& what) {
+  return LoadYaml<nlohmann::ordered_json>(yaml_text, what).dump();
 }
 
 std::string FieldsToJsonText(void* options, void (*visit)(void*, OptionVisitor&), int indent) {
@@ -223,6 +233,10 @@ std::string FieldsToJsonText(void* options, void (*visit)(void*, OptionVisitor&)
 }
 
 }  // namespace internal
+
+std::string YamlToJsonText(const std::string& yaml_text, const std::string& what) {
+  return internal::YamlTextToJsonText(yaml_text, what);
+}
 
 namespace {
 [[noreturn]] void Fail(const char* owner, const char* field, double value, const char* op,

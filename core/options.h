@@ -72,6 +72,11 @@ std::string OptionsToJson(const Options& options, int indent = 2) {
   return internal::FieldsToJsonText(&copy, &internal::Visit<Options>, indent);
 }
 
+// A YAML document as JSON text (scalars typed the way a person reads them; quoted
+// scalars stay strings; mappings keep their order). Malformed YAML throws Error
+// naming `what`.
+std::string YamlToJsonText(const std::string& yaml_text, const std::string& what);
+
 // Check helpers for Check(): throw Error("<struct>.<field> = <value> must be <bound>").
 void CheckGt(const char* owner, const char* field, double value, double bound);
 void CheckGe(const char* owner, const char* field, double value, double bound);

@@ -26,6 +26,8 @@ void AddTrainCommands(CLI::App& app);
 void AddTrackCommand(CLI::App& app);
 void AddTrainTrackerCommand(CLI::App& app);
 // capture (Sec. 5: online capture) and eval (its metrics against ground truth), issue 6.
-void AddCaptureCommands(CLI::App& app);  // train-tracker (issue 5: the landmark regressor)
+void AddCaptureCommands(CLI::App& app);
+// experiment list|run (the runner, eval/experiment.h) and report (reports/), issue 7.
+void AddExperimentCommands(CLI::App& app);
 
 }  // namespace crease::app

@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   crease::app::AddTrackCommand(app);
   crease::app::AddTrainTrackerCommand(app);
   crease::app::AddCaptureCommands(app);
+  crease::app::AddExperimentCommands(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

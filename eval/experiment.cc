@@ -1,0 +1,911 @@
+#include "eval/experiment.h"
+
+#include <spawn.h>
+#include <sys/utsname.h>
+#include <sys/wait.h>
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <condition_variable>
+#include <fstream>
+#include <mutex>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include <fmt/format.h>
+
+#include "core/error.h"
+#include "core/file_util.h"
+#include "core/json_io.h"
+#include "eval/capture_metrics.h"
+#include "eval/tracker_training.h"
+#include "pipeline/capture/capture.h"
+#include "pipeline/training/trainer.h"
+#include "synth/actor.h"
+#include "synth/procedural_rig.h"
+#include "synth/sequence.h"
+#include "synth/studio.h"
+
+extern char** environ;
+
+namespace crease {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+void ExperimentDataset::VisitFields(OptionVisitor& v) {
+  v.Field("training_actors", training_actors);
+  v.Field("training_seed", training_seed);
+  v.Field("scan_cameras", scan_cameras);
+  v.Field("scan_lights", scan_lights);
+  v.Field("scan_expressions", scan_expressions);
+  v.Field("scan_samples", scan_samples);
+  v.Field("capture", capture);
+  v.Field("test_actors", test_actors);
+  v.Field("test_seed", test_seed);
+  v.Field("preset", preset);
+  v.Field("seconds", seconds);
+  v.Field("frames", frames);
+  v.Field("light", light);
+  v.Field("landmarks", landmarks);
+  v.Field("landmark_noise_px", landmark_noise_px);
+  v.Field("tracker_seed", tracker_seed);
+  v.Field("mesh_every", mesh_every);
+  v.Field("cache_salt", cache_salt);
+}
+
+void ExperimentDataset::Check() const {
+  CheckGe("dataset", "training_actors", training_actors, 1);
+  CheckGe("dataset", "training_seed", static_cast<double>(training_seed), 0);
+  CheckGe("dataset", "scan_cameras", scan_cameras, 1);
+  Require(!scan_lights.empty(), "dataset.scan_lights must name at least one light rig");
+  CheckGe("dataset", "scan_samples", scan_samples, 1);
+  CheckGe("dataset", "test_actors", test_actors, 1);
+  CheckGe("dataset", "test_seed", static_cast<double>(test_seed), 0);
+  CheckOneOf("dataset", "preset", preset, SequencePresetNames());
+  CheckGe("dataset", "seconds", seconds, 0.0);
+  CheckOneOf("dataset", "landmarks", landmarks, {"regressor", "dlib", "ground-truth-prior"});
+  CheckGe("dataset", "landmark_noise_px", landmark_noise_px, 0.0);
+  CheckGe("dataset", "mesh_every", mesh_every, 1);
+}
+
+namespace {
+
+// Validates a section's JSON object by setting it on a default Options struct
+// (unknown keys and wrong types throw naming `what` and the key).
+template <class Options>
+void ValidateAs(const json& j, const std::string& what) {
+  Options o;
+  SetOptionsFromJson(j.dump(), what, &o);
+}
+
+struct SectionInfo {
+  const char* name;
+  void (*validate)(const json&, const std::string&);
+};
+
+const std::vector<SectionInfo>& Sections() {
+  static const std::vector<SectionInfo> s = {
+      {"dataset", &ValidateAs<ExperimentDataset>},     {"rig", &ValidateAs<ProceduralRigOptions>},
+      {"actor", &ValidateAs<ActorOptions>},            {"test_actor", &ValidateAs<ActorOptions>},
+      {"studio", &ValidateAs<StudioOptions>},          {"training", &ValidateAs<TrainingOptions>},
+      {"tracker", &ValidateAs<TrackerTrainingOptions>}, {"capture", &ValidateAs<CaptureOptions>},
+      {"eval", &ValidateAs<CaptureEvalOptions>},
+  };
+  return s;
+}
+
+const SectionInfo& FindSection(const std::string& name, const std::string& what) {
+  for (const auto& s : Sections())
+    if (name == s.name) return s;
+  std::vector<std::string> names;
+  for (const auto& s : Sections()) names.emplace_back(s.name);
+  throw Error(fmt::format("{}: unknown section '{}' (sections: {})", what, name, fmt::join(names, ", ")));
+}
+
+// "section.field" → (section, field); errors name `what`.
+std::pair<std::string, std::string> SplitKey(const std::string& key, const std::string& what) {
+  const auto dot = key.find('.');
+  if (dot == std::string::npos || dot == 0 || dot + 1 == key.size())
+    throw Error(fmt::format("{}: '{}' must be SECTION.FIELD (e.g. training.num_ferns)", what, key));
+  return {key.substr(0, dot), key.substr(dot + 1)};
+}
+
+// Sets section.field = value on `config` and validates the section.
+void SetDotted(ExperimentConfig* config, const std::string& key, const json& value, const std::string& what) {
+  const auto [section, field] = SplitKey(key, what);
+  const SectionInfo& info = FindSection(section, fmt::format("{} ('{}')", what, key));
+  json& obj = config->sections[section];
+  if (!obj.is_object()) obj = json::object();
+  json trial = obj;
+  trial[field] = value;
+  info.validate(trial, fmt::format("{} ('{}')", what, key));
+  obj = std::move(trial);
+}
+
+ExperimentDataset DatasetOf(const ExperimentConfig& c) {
+  ExperimentDataset d;
+  const auto it = c.sections.find("dataset");
+  if (it != c.sections.end()) SetOptionsFromJson(it->second.dump(), "dataset", &d);
+  return d;
+}
+
+json SectionOf(const ExperimentConfig& c, const std::string& name) {
+  const auto it = c.sections.find(name);
+  return it == c.sections.end() ? json::object() : it->second;
+}
+
+std::string ValueText(const json& v) {
+  if (v.is_string()) {
+    const std::string s = v.get<std::string>();
+    // Plain when --set would read it back as this string; JSON-quoted otherwise.
+    const json back = json::parse(s, nullptr, false);
+    if (back.is_discarded() && s.find_first_of(" \t\n'\"") == std::string::npos) return s;
+  }
+  return v.dump();
+}
+
+// --set KEY=VALUE for every field of a section (sorted keys: stable commands).
+void AppendSets(const json& section, std::vector<std::string>* argv) {
+  for (const auto& [k, v] : section.items()) {
+    argv->push_back("--set");
+    argv->push_back(k + "=" + ValueText(v));
+  }
+}
+
+std::string Join(const std::vector<std::string>& v, const char* sep) { return fmt::format("{}", fmt::join(v, sep)); }
+
+std::string ShellQuote(const std::string& s) {
+  if (!s.empty() && s.find_first_not_of("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-.,/=:+@%") ==
+                        std::string::npos)
+    return s;
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+std::string CommandLine(const std::vector<std::string>& argv) {
+  std::string out = "crease";
+  for (const auto& a : argv) out += " " + ShellQuote(a);
+  return out;
+}
+
+std::string SanitizeId(const std::string& s) {
+  std::string out;
+  for (char c : s) out += (std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '=' || c == '-' || c == '_') ? c : '-';
+  return out;
+}
+
+}  // namespace
+
+const std::vector<std::string>& ExperimentSections() {
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> n;
+    for (const auto& s : Sections()) n.emplace_back(s.name);
+    return n;
+  }();
+  return names;
+}
+
+namespace {
+
+ExperimentConfig ParseExperimentConfigImpl(const std::string& yaml_text, const std::string& what) {
+  const std::string text = YamlToJsonText(yaml_text, what);
+  const json j = json::parse(text);
+  const nlohmann::ordered_json ordered = nlohmann::ordered_json::parse(text);  // the sweep keeps its order
+  Require(j.is_object(), fmt::format("{}: an experiment config must be a YAML mapping", what));
+  ExperimentConfig c;
+  static const std::set<std::string> kText = {"name", "title", "paper", "description"};
+  static const std::set<std::string> kReport = {"table", "figures", "claims"};
+  for (const auto& [key, value] : j.items()) {
+    if (kText.count(key)) {
+      Require(value.is_string(), fmt::format("{}: '{}' must be text", what, key));
+      const std::string s = value.get<std::string>();
+      if (key == "name") c.name = s;
+      if (key == "title") c.title = s;
+      if (key == "paper") c.paper = s;
+      if (key == "description") c.description = s;
+    } else if (key == "seeds") {
+      Require(value.is_number_integer() && value.get<int>() >= 1, fmt::format("{}: 'seeds' must be an integer ≥ 1", what));
+      c.seeds = value.get<int>();
+    } else if (kReport.count(key)) {
+      c.report[key] = value;
+    } else if (key == "profiles") {
+      Require(value.is_object(), fmt::format("{}: 'profiles' must map a profile name to its settings", what));
+      c.profiles = value;
+    } else if (key == "sweep") {
+      Require(value.is_object(), fmt::format("{}: 'sweep' must be a mapping (mode, values)", what));
+      for (const auto& [sk, sv] : value.items()) {
+        if (sk == "mode") {
+          Require(sv.is_string(), fmt::format("{}: sweep.mode must be none, list or grid", what));
+          c.sweep.mode = sv.get<std::string>();
+          CheckOneOf("sweep", "mode", c.sweep.mode, {"none", "list", "grid"});
+        } else if (sk == "values") {
+          Require(sv.is_object(), fmt::format("{}: sweep.values must map SECTION.FIELD to a list", what));
+          for (const auto& [k, v] : ordered["sweep"]["values"].items()) c.sweep.values.emplace_back(k, json::parse(v.dump()));
+        } else {
+          throw Error(fmt::format("{}: unknown sweep key '{}' (mode, values)", what, sk));
+        }
+      }
+    } else {
+      bool known = false;
+      for (const auto& s : Sections()) known = known || key == s.name;
+      if (!known)
+        throw Error(fmt::format("{}: unknown key '{}' (name, title, paper, description, seeds, sweep, profiles, table, "
+                                "figures, claims, or a section: {})",
+                                what, key, Join(ExperimentSections(), ", ")));
+      Require(value.is_object() || value.is_null(), fmt::format("{}: section '{}' must be a mapping", what, key));
+      const json obj = value.is_null() ? json::object() : value;
+      FindSection(key, what).validate(obj, fmt::format("{} (section {})", what, key));
+      c.sections[key] = obj;
+    }
+  }
+  Require(!c.name.empty(), fmt::format("{}: the config has no 'name'", what));
+  if (c.title.empty()) c.title = c.name;
+  if (c.sweep.mode == "none" && !c.sweep.values.empty()) c.sweep.mode = "list";
+  // Check the sweep keys and values, the dataset as a whole and every profile now,
+  // so that a bad config fails before anything runs.
+  for (const auto& [key, values] : c.sweep.values) {
+    Require(values.is_array() && !values.empty(),
+            fmt::format("{}: sweep value '{}' must be a non-empty list", what, key));
+    for (const auto& v : values) {
+      ExperimentConfig trial = c;
+      SetDotted(&trial, key, v, fmt::format("{}: sweep", what));
+    }
+  }
+  DatasetOf(c);
+  for (const auto& [name, p] : c.profiles.items()) ApplyProfile(c, name);
+  return c;
+}
+
+}  // namespace
+
+ExperimentConfig ParseExperimentConfig(const std::string& yaml_text, const std::string& what) {
+  try {
+    return ParseExperimentConfigImpl(yaml_text, what);
+  } catch (const Error& e) {
+    // Every message names the config (option checks name only the field).
+    const std::string m = e.what();
+    if (m.rfind(what, 0) == 0) throw;
+    throw Error(fmt::format("{}: {}", what, m));
+  }
+}
+
+ExperimentConfig ReadExperimentConfig(const fs::path& path) {
+  ExperimentConfig c = ParseExperimentConfig(ReadFileToString(path), path.string());
+  c.source = path;
+  return c;
+}
+
+ExperimentConfig ApplyProfile(const ExperimentConfig& config, const std::string& profile) {
+  if (profile.empty()) return config;
+  const std::string what = fmt::format("{}: profile '{}'", config.source.empty() ? config.name : config.source.string(), profile);
+  ExperimentConfig c = config;
+  if (!config.profiles.contains(profile)) {
+    // A profile the config does not mention leaves it as it is (its defaults are
+    // what that profile runs), unless the name is not a profile at all.
+    CheckOneOf("experiment", "profile", profile, {"quick", "paper"});
+    return c;
+  }
+  const json& p = config.profiles.at(profile);
+  Require(p.is_object(), fmt::format("{} must be a mapping (set, sweep, seeds)", what));
+  for (const auto& [k, v] : p.items()) {
+    if (k == "set") {
+      Require(v.is_object(), fmt::format("{}: 'set' must map SECTION.FIELD to a value", what));
+      for (const auto& [key, value] : v.items()) SetDotted(&c, key, value, what);
+    } else if (k == "sweep") {
+      Require(v.is_object(), fmt::format("{}: 'sweep' must map SECTION.FIELD to a list", what));
+      for (const auto& [key, values] : v.items()) {
+        Require(values.is_array() && !values.empty(), fmt::format("{}: sweep '{}' must be a non-empty list", what, key));
+        for (const auto& value : values) {
+          ExperimentConfig trial = c;
+          SetDotted(&trial, key, value, what + ": sweep");
+        }
+        auto it = std::find_if(c.sweep.values.begin(), c.sweep.values.end(), [&](const auto& e) { return e.first == key; });
+        if (it == c.sweep.values.end()) {
+          c.sweep.values.emplace_back(key, values);
+          if (c.sweep.mode == "none") c.sweep.mode = "list";
+        } else {
+          it->second = values;
+        }
+      }
+    } else if (k == "seeds") {
+      Require(v.is_number_integer() && v.get<int>() >= 1, fmt::format("{}: 'seeds' must be an integer ≥ 1", what));
+      c.seeds = v.get<int>();
+    } else {
+      throw Error(fmt::format("{}: unknown key '{}' (set, sweep, seeds)", what, k));
+    }
+  }
+  DatasetOf(c);
+  return c;
+}
+
+std::vector<ExperimentRun> ExpandRuns(const ExperimentConfig& config) {
+  std::vector<json> points;
+  if (config.sweep.mode == "none" || config.sweep.values.empty()) {
+    points.push_back(json::object());
+  } else if (config.sweep.mode == "list") {
+    for (const auto& [key, values] : config.sweep.values)
+      for (const auto& v : values) points.push_back(json{{key, v}});
+  } else {  // grid: the last key varies fastest
+    points.push_back(json::object());
+    for (const auto& [key, values] : config.sweep.values) {
+      std::vector<json> next;
+      for (const auto& p : points)
+        for (const auto& v : values) {
+          json q = p;
+          q[key] = v;
+          next.push_back(q);
+        }
+      points = std::move(next);
+    }
+  }
+  std::vector<ExperimentRun> runs;
+  for (const auto& point : points) {
+    ExperimentConfig resolved = config;
+    std::vector<std::string> parts;
+    // In config order (json objects sort their keys; the sweep list keeps the order).
+    for (const auto& [key, values] : config.sweep.values) {
+      if (!point.contains(key)) continue;
+      SetDotted(&resolved, key, point.at(key), "sweep");
+      parts.push_back(key + "=" + ValueText(point.at(key)));
+    }
+    const std::string base = parts.empty() ? "base" : Join(parts, "_");
+    for (int s = 1; s <= config.seeds; ++s) {
+      ExperimentRun r;
+      r.seed = s;
+      r.point = point;
+      r.resolved = resolved;
+      r.id = SanitizeId(fmt::format("{}_seed{}", base, s));
+      runs.push_back(std::move(r));
+    }
+  }
+  std::set<std::string> ids;
+  for (const auto& r : runs)
+    Require(ids.insert(r.id).second,
+            fmt::format("{}: two runs share the id '{}' (a sweep lists a value twice?)", config.name, r.id));
+  return runs;
+}
+
+std::vector<ExperimentRun> ShardRuns(const std::vector<ExperimentRun>& runs, int shard, int num_shards) {
+  Require(num_shards >= 1 && shard >= 0 && shard < num_shards,
+          fmt::format("--shard {}/{}: expected I/N with 1 ≤ I ≤ N", shard + 1, num_shards));
+  std::vector<ExperimentRun> out;
+  for (size_t i = static_cast<size_t>(shard); i < runs.size(); i += static_cast<size_t>(num_shards))
+    out.push_back(runs[i]);
+  return out;
+}
+
+std::string ExperimentKey(const json& j) {
+  const std::string s = j.dump();
+  uint64_t h = 1469598103934665603ull;  // FNV-1a, 64 bit
+  for (unsigned char c : s) {
+    h ^= c;
+    h *= 1099511628211ull;
+  }
+  return fmt::format("{:016x}", h);
+}
+
+std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::path& cache,
+                                           const std::string& program_version) {
+  const ExperimentConfig& c = run.resolved;
+  const ExperimentDataset d = DatasetOf(c);
+  const int64_t seed_offset = 1000 * static_cast<int64_t>(run.seed - 1);
+  std::vector<ExperimentStage> stages;
+  auto add = [&](const std::string& kind, json inputs, std::vector<std::string> depends,
+                 const std::function<std::vector<std::string>(const fs::path&)>& argv) -> const ExperimentStage& {
+    inputs["stage"] = kind;
+    inputs["crease"] = program_version;
+    inputs["salt"] = d.cache_salt;
+    inputs["depends"] = depends;
+    ExperimentStage s;
+    s.kind = kind;
+    s.key = ExperimentKey(inputs);
+    s.key_inputs = std::move(inputs);
+    s.dir = cache / kind / s.key;
+    s.argv = argv(s.dir);
+    s.depends = std::move(depends);
+    stages.push_back(std::move(s));
+    return stages.back();
+  };
+
+  const ExperimentStage rig = add("rig", {{"rig", SectionOf(c, "rig")}}, {}, [&](const fs::path& dir) {
+    std::vector<std::string> a = {"synth", "rig", "-o", (dir / "rig.crig").string()};
+    AppendSets(SectionOf(c, "rig"), &a);
+    return a;
+  });
+  const fs::path rig_file = rig.dir / "rig.crig";
+
+  const int64_t training_seed = d.training_seed + seed_offset;
+  const ExperimentStage scans = add(
+      "scans",
+      {{"actor", SectionOf(c, "actor")},
+       {"actors", d.training_actors},
+       {"seed", training_seed},
+       {"cameras", d.scan_cameras},
+       {"lights", d.scan_lights},
+       {"expressions", d.scan_expressions},
+       {"samples", d.scan_samples}},
+      {rig.key}, [&](const fs::path& dir) {
+        std::vector<std::string> a = {"synth",     "scans",  "--rig",     rig_file.string(),
+                                      "--actors",  std::to_string(d.training_actors),
+                                      "--seed",    std::to_string(training_seed),
+                                      "--cameras", std::to_string(d.scan_cameras),
+                                      "--lights",  Join(d.scan_lights, ","),
+                                      "--samples", std::to_string(d.scan_samples)};
+        for (const auto& e : d.scan_expressions) {
+          a.push_back("-e");
+          a.push_back(e);
+        }
+        AppendSets(SectionOf(c, "actor"), &a);
+        a.insert(a.end(), {"--overwrite", "-o", (dir / "scans").string()});
+        return a;
+      });
+
+  const ExperimentStage model =
+      add("model", {{"training", SectionOf(c, "training")}}, {rig.key, scans.key}, [&](const fs::path& dir) {
+        std::vector<std::string> a = {"train", "--scans", (scans.dir / "scans").string(), "--rig", rig_file.string(),
+                                      "--out", (dir / "model.cdm").string(), "--report", (dir / "report").string()};
+        AppendSets(SectionOf(c, "training"), &a);
+        return a;
+      });
+  if (!d.capture) return stages;
+
+  std::string tracker_key;
+  fs::path tracker_file;
+  if (d.landmarks == "regressor") {
+    const ExperimentStage tracker = add("tracker", {{"tracker", SectionOf(c, "tracker")}, {"seed", d.tracker_seed}},
+                                        {rig.key}, [&](const fs::path& dir) {
+                                          std::vector<std::string> a = {"train-tracker", "--rig", rig_file.string(),
+                                                                        "-o", (dir / "tracker.ctrk").string(),
+                                                                        "--seed", std::to_string(d.tracker_seed)};
+                                          AppendSets(SectionOf(c, "tracker"), &a);
+                                          return a;
+                                        });
+    tracker_key = tracker.key;
+    tracker_file = tracker.dir / "tracker.ctrk";
+  }
+
+  for (int i = 0; i < d.test_actors; ++i) {
+    const int64_t actor_seed = d.test_seed + seed_offset + i;
+    const ExperimentStage actor =
+        add("actor", {{"actor", SectionOf(c, "test_actor")}, {"seed", actor_seed}}, {rig.key}, [&](const fs::path& dir) {
+          std::vector<std::string> a = {"synth", "actor", "--rig", rig_file.string(), "--seed", std::to_string(actor_seed),
+                                        "-o", (dir / "actor.json").string()};
+          AppendSets(SectionOf(c, "test_actor"), &a);
+          return a;
+        });
+    const ExperimentStage sequence = add(
+        "sequence",
+        {{"studio", SectionOf(c, "studio")},
+         {"preset", d.preset},
+         {"seconds", d.seconds},
+         {"frames", d.frames},
+         {"light", d.light}},
+        {rig.key, actor.key}, [&](const fs::path& dir) {
+          std::vector<std::string> a = {"synth", "sequence", "--rig", rig_file.string(), "--actor",
+                                        (actor.dir / "actor.json").string(), "--preset", d.preset};
+          if (d.seconds > 0) a.insert(a.end(), {"--seconds", fmt::format("{}", d.seconds)});
+          if (d.frames >= 0) a.insert(a.end(), {"--frames", std::to_string(d.frames)});
+          if (!d.light.empty()) a.insert(a.end(), {"--light", d.light});
+          AppendSets(SectionOf(c, "studio"), &a);
+          a.insert(a.end(), {"--overwrite", "-o", (dir / "dataset").string()});
+          return a;
+        });
+    std::vector<std::string> capture_depends = {model.key, sequence.key};
+    if (!tracker_key.empty()) capture_depends.push_back(tracker_key);
+    const ExperimentStage capture = add(
+        "capture",
+        {{"capture", SectionOf(c, "capture")},
+         {"landmarks", d.landmarks},
+         {"noise", d.landmark_noise_px},
+         {"mesh_every", d.mesh_every}},
+        capture_depends, [&](const fs::path& dir) {
+          std::vector<std::string> a = {"capture", "-i", (sequence.dir / "dataset").string(), "--model",
+                                        (model.dir / "model.cdm").string()};
+          if (d.landmarks == "regressor") {
+            a.insert(a.end(), {"--tracker", tracker_file.string()});
+          } else if (d.landmarks == "dlib") {
+            a.insert(a.end(), {"--landmarks", "dlib"});
+          } else {
+            a.insert(a.end(), {"--ground-truth-prior", "--noise", fmt::format("{}", d.landmark_noise_px)});
+          }
+          a.insert(a.end(), {"--mesh-every", std::to_string(d.mesh_every)});
+          AppendSets(SectionOf(c, "capture"), &a);
+          a.insert(a.end(), {"--overwrite", "-o", (dir / "capture").string()});
+          return a;
+        });
+    add("eval", {{"eval", SectionOf(c, "eval")}}, {capture.key, sequence.key}, [&](const fs::path& dir) {
+      std::vector<std::string> a = {"eval", "--capture", (capture.dir / "capture").string(), "--dataset",
+                                    (sequence.dir / "dataset").string(), "-o", dir.string()};
+      AppendSets(SectionOf(c, "eval"), &a);
+      return a;
+    });
+  }
+  return stages;
+}
+
+StageExecutor SubprocessExecutor(const fs::path& program) {
+  return [program](const std::vector<std::string>& argv, const fs::path& log) -> int {
+    std::vector<std::string> args = {program.string()};
+    args.insert(args.end(), argv.begin(), argv.end());
+    std::vector<char*> cargs;
+    for (auto& a : args) cargs.push_back(a.data());
+    cargs.push_back(nullptr);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    const std::string log_path = log.string();
+    posix_spawn_file_actions_addopen(&actions, 1, log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&actions, 1, 2);
+    posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
+    pid_t pid = 0;
+    const int rc = posix_spawn(&pid, cargs[0], &actions, nullptr, cargs.data(), environ);
+    posix_spawn_file_actions_destroy(&actions);
+    if (rc != 0) throw Error(fmt::format("cannot start {}: {}", program.string(), std::strerror(rc)));
+    int status = 0;
+    while (waitpid(pid, &status, 0) < 0) {
+      if (errno != EINTR) throw Error(fmt::format("waiting for {}: {}", program.string(), std::strerror(errno)));
+    }
+    if (WIFEXITED(status)) return WEXITSTATUS(status);
+    return 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+  };
+}
+
+namespace {
+
+void Flatten(const json& j, const std::string& prefix, json* out) {
+  if (j.is_object()) {
+    for (const auto& [k, v] : j.items()) Flatten(v, prefix.empty() ? k : prefix + "." + k, out);
+  } else if (j.is_number()) {
+    (*out)[prefix] = j;
+  } else if (j.is_boolean()) {
+    (*out)[prefix] = j.get<bool>() ? 1 : 0;
+  }
+}
+
+std::string TailOfFile(const fs::path& path, size_t max_chars) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return "";
+  std::stringstream ss;
+  ss << in.rdbuf();
+  std::string s = ss.str();
+  if (s.size() > max_chars) s = "…" + s.substr(s.size() - max_chars);
+  return s;
+}
+
+json MachineJson() {
+  json m;
+  m["cpus"] = std::thread::hardware_concurrency();
+  std::ifstream cpuinfo("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(cpuinfo, line)) {
+    if (line.rfind("model name", 0) == 0) {
+      const auto colon = line.find(':');
+      if (colon != std::string::npos) m["cpu"] = line.substr(line.find_first_not_of(' ', colon + 1));
+      break;
+    }
+  }
+  utsname u{};
+  if (uname(&u) == 0) m["os"] = fmt::format("{} {} {}", u.sysname, u.release, u.machine);
+  return m;
+}
+
+std::string CsvCell(const json& v) {
+  if (v.is_null()) return "";
+  std::string s = v.is_string() ? v.get<std::string>() : v.dump();
+  if (s.find_first_of(",\"\n") != std::string::npos) {
+    std::string q = "\"";
+    for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
+    return q + "\"";
+  }
+  return s;
+}
+
+}  // namespace
+
+json CollectRunMetrics(const std::vector<ExperimentStage>& stages) {
+  json metrics = json::object(), curves = json::object();
+  std::vector<json> evals;
+  for (const auto& s : stages) {
+    if (s.kind == "model") {
+      const fs::path report = s.dir / "report" / "report.json";
+      if (!fs::exists(report)) continue;
+      const json r = ReadJsonFile(report);
+      json flat = json::object();
+      Flatten(r, "model", &flat);
+      for (const auto& [k, v] : flat.items()) metrics[k] = v;
+      if (r.contains("pca_energy") && r["pca_energy"].is_array()) {
+        curves["pca_energy"] = r["pca_energy"];
+        int dims = -1;
+        for (size_t i = 0; i < r["pca_energy"].size(); ++i) {
+          if (r["pca_energy"][i].get<double>() >= 0.85) {
+            dims = static_cast<int>(i) + 1;
+            break;
+          }
+        }
+        metrics["model.pca_dims_85"] = dims;
+      }
+    } else if (s.kind == "eval") {
+      const fs::path e = s.dir / "eval.json";
+      if (fs::exists(e)) evals.push_back(ReadJsonFile(e));
+    }
+  }
+  // The mean over the run's test sequences of every numeric metric.
+  std::map<std::string, std::pair<double, int>> sums;
+  for (const auto& e : evals) {
+    json flat = json::object();
+    json copy = e;
+    copy.erase("per_frame");
+    Flatten(copy, "", &flat);
+    for (const auto& [k, v] : flat.items()) {
+      const double x = v.get<double>();
+      if (!std::isfinite(x)) continue;
+      auto& acc = sums[k];
+      acc.first += x;
+      acc.second += 1;
+    }
+  }
+  for (const auto& [k, acc] : sums) metrics[k] = acc.first / acc.second;
+  if (!evals.empty() && evals.front().contains("per_frame") && evals.front()["per_frame"].is_array()) {
+    const json& pf = evals.front()["per_frame"];
+    std::set<std::string> fields;
+    for (const auto& f : pf)
+      if (f.is_object())
+        for (const auto& [k, v] : f.items())
+          if (v.is_number() || v.is_null()) fields.insert(k);
+    for (const auto& field : fields) {
+      if (field == "frame") continue;
+      json series = json::array();
+      for (const auto& f : pf) series.push_back(f.is_object() && f.contains(field) ? f[field] : json(nullptr));
+      curves["per_frame." + field] = series;
+    }
+  }
+  return json{{"metrics", metrics}, {"curves", curves}};
+}
+
+ExperimentSummary RunExperiment(const ExperimentConfig& config_in, const ExperimentRunnerOptions& options,
+                                const StageExecutor& executor) {
+  const auto t_start = std::chrono::steady_clock::now();
+  auto log = [&](const std::string& s) {
+    if (options.log) options.log(s);
+  };
+  ExperimentConfig config = ApplyProfile(config_in, options.profile);
+  if (options.seeds > 0) config.seeds = options.seeds;
+  Require(options.jobs >= 1, "--jobs must be ≥ 1");
+  const std::vector<ExperimentRun> all_runs = ExpandRuns(config);
+  const std::vector<ExperimentRun> runs = ShardRuns(all_runs, options.shard, options.num_shards);
+
+  // Plan: the stages of every run, deduplicated by key (a sweep over capture options
+  // shares rig, scans, model, tracker and sequences).
+  std::vector<std::vector<ExperimentStage>> run_stages;
+  std::vector<ExperimentStage> unique;
+  std::map<std::string, size_t> index;
+  for (const auto& r : runs) {
+    run_stages.push_back(PlanRunStages(r, options.cache, options.program_version));
+    for (const auto& s : run_stages.back()) {
+      if (index.count(s.key)) continue;
+      index[s.key] = unique.size();
+      unique.push_back(s);
+    }
+  }
+
+  enum class State { kPending, kRunning, kDone, kFailed };
+  std::vector<State> state(unique.size(), State::kPending);
+  std::vector<std::string> failure(unique.size());
+  ExperimentSummary summary;
+  summary.runs = static_cast<int>(runs.size());
+  summary.stages = static_cast<int>(unique.size());
+  for (size_t i = 0; i < unique.size(); ++i) {
+    const fs::path done = unique[i].dir / "stage.json";
+    if (fs::exists(done)) {
+      try {
+        if (ReadJsonFile(done).at("key_inputs") == unique[i].key_inputs) {
+          state[i] = State::kDone;
+          ++summary.stages_cached;
+        }
+      } catch (const std::exception&) {
+        // unreadable: rebuilt below
+      }
+    }
+  }
+  log(fmt::format("{}: {} runs{}, {} stages ({} cached)", config.name, runs.size(),
+                  options.num_shards > 1 ? fmt::format(" (shard {}/{} of {})", options.shard + 1, options.num_shards,
+                                                       all_runs.size())
+                                         : "",
+                  unique.size(), summary.stages_cached));
+
+  std::mutex mutex;
+  std::condition_variable cv;
+  int running = 0;
+  auto worker = [&] {
+    std::unique_lock<std::mutex> lock(mutex);
+    for (;;) {
+      // The first pending stage whose inputs are done; fail those whose inputs failed.
+      size_t pick = unique.size();
+      bool any_pending = false;
+      for (size_t i = 0; i < unique.size(); ++i) {
+        if (state[i] != State::kPending) continue;
+        bool ready = true, failed = false;
+        for (const auto& dep : unique[i].depends) {
+          const State ds = state[index.at(dep)];
+          failed = failed || ds == State::kFailed;
+          ready = ready && ds == State::kDone;
+        }
+        if (failed) {
+          state[i] = State::kFailed;
+          failure[i] = "an input stage failed";
+          ++summary.stages_failed;
+          cv.notify_all();
+          continue;
+        }
+        any_pending = true;
+        if (ready) {
+          pick = i;
+          break;
+        }
+      }
+      if (pick == unique.size()) {
+        if (!any_pending && running == 0) {
+          cv.notify_all();
+          return;
+        }
+        if (!any_pending) return;
+        cv.wait(lock);
+        continue;
+      }
+      state[pick] = State::kRunning;
+      ++running;
+      const ExperimentStage& s = unique[pick];
+      log(fmt::format("  {} {} …  {}", s.kind, s.key, CommandLine(s.argv)));
+      lock.unlock();
+      std::string error;
+      const auto t0 = std::chrono::steady_clock::now();
+      try {
+        std::error_code ec;
+        fs::remove_all(s.dir, ec);  // an incomplete folder of an earlier, interrupted run
+        fs::create_directories(s.dir);
+        const int rc = executor(s.argv, s.dir / "log.txt");
+        if (rc != 0) {
+          error = fmt::format("{} stage failed (exit status {}): {}\n{}", s.kind, rc, CommandLine(s.argv),
+                              TailOfFile(s.dir / "log.txt", 1500));
+        } else {
+          const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+          WriteJsonFile(s.dir / "stage.json", json{{"kind", s.kind},
+                                                   {"key", s.key},
+                                                   {"key_inputs", s.key_inputs},
+                                                   {"command", CommandLine(s.argv)},
+                                                   {"seconds", seconds}});
+        }
+      } catch (const std::exception& e) {
+        error = fmt::format("{} stage: {}", s.kind, e.what());
+      }
+      lock.lock();
+      --running;
+      if (error.empty()) {
+        state[pick] = State::kDone;
+        ++summary.stages_run;
+      } else {
+        state[pick] = State::kFailed;
+        failure[pick] = error;
+        ++summary.stages_failed;
+        log("  FAILED: " + error);
+      }
+      cv.notify_all();
+    }
+  };
+  {
+    std::vector<std::thread> threads;
+    for (int j = 0; j < options.jobs; ++j) threads.emplace_back(worker);
+    for (auto& t : threads) t.join();
+  }
+
+  // Collect: a JSON per run, then the experiment's CSV and description.
+  fs::create_directories(options.out / "runs");
+  std::vector<json> run_jsons;
+  json runs_ok = json::array(), runs_failed = json::array();
+  for (size_t r = 0; r < runs.size(); ++r) {
+    json j;
+    j["run_id"] = runs[r].id;
+    j["experiment"] = config.name;
+    j["seed"] = runs[r].seed;
+    j["point"] = runs[r].point;
+    json commands = json::array(), keys = json::object();
+    std::string error;
+    double seconds = 0.0;
+    for (const auto& s : run_stages[r]) {
+      commands.push_back(CommandLine(s.argv));
+      keys[s.kind] = keys.contains(s.kind) ? json(keys[s.kind].get<std::string>() + "," + s.key) : json(s.key);
+      const size_t i = index.at(s.key);
+      if (state[i] != State::kDone && error.empty())
+        error = failure[i].empty() ? fmt::format("{} stage did not run", s.kind) : failure[i];
+      if (state[i] == State::kDone) {
+        try {
+          seconds += ReadJsonFile(s.dir / "stage.json").value("seconds", 0.0);
+        } catch (const std::exception&) {
+        }
+      }
+    }
+    j["commands"] = commands;
+    j["stages"] = keys;
+    j["stage_seconds"] = seconds;
+    if (error.empty()) {
+      try {
+        const json m = CollectRunMetrics(run_stages[r]);
+        j["metrics"] = m["metrics"];
+        j["curves"] = m["curves"];
+      } catch (const std::exception& e) {
+        error = fmt::format("collecting metrics: {}", e.what());
+      }
+    }
+    j["status"] = error.empty() ? "ok" : "failed";
+    if (!error.empty()) j["error"] = error;
+    (error.empty() ? runs_ok : runs_failed).push_back(runs[r].id);
+    WriteJsonFile(options.out / "runs" / (runs[r].id + ".json"), j);
+    run_jsons.push_back(std::move(j));
+  }
+  summary.runs_ok = static_cast<int>(runs_ok.size());
+  summary.runs_failed = static_cast<int>(runs_failed.size());
+
+  // results.csv: run, seed, status, the swept keys, the metrics (union, sorted).
+  std::vector<std::string> point_keys;
+  for (const auto& [key, values] : config.sweep.values) point_keys.push_back(key);
+  std::set<std::string> metric_keys;
+  for (const auto& j : run_jsons)
+    if (j.contains("metrics"))
+      for (const auto& [k, v] : j["metrics"].items()) metric_keys.insert(k);
+  WriteFileAtomic(options.out / "results.csv", [&](std::ostream& o) {
+    o << "run_id,seed,status";
+    for (const auto& k : point_keys) o << "," << CsvCell(k);
+    for (const auto& k : metric_keys) o << "," << CsvCell(k);
+    o << "\n";
+    for (const auto& j : run_jsons) {
+      o << CsvCell(j["run_id"]) << "," << j["seed"].get<int>() << "," << CsvCell(j["status"]);
+      for (const auto& k : point_keys) o << "," << (j["point"].contains(k) ? CsvCell(j["point"][k]) : "");
+      for (const auto& k : metric_keys)
+        o << "," << (j.contains("metrics") && j["metrics"].contains(k) ? CsvCell(j["metrics"][k]) : "");
+      o << "\n";
+    }
+  });
+
+  json e;
+  e["name"] = config.name;
+  e["title"] = config.title;
+  e["paper"] = config.paper;
+  e["description"] = config.description;
+  e["config"] = config.source.string();
+  e["profile"] = options.profile;
+  json seeds = json::array();
+  for (int s = 1; s <= config.seeds; ++s) seeds.push_back(s);
+  e["seeds"] = seeds;
+  e["command"] = options.command;
+  e["crease_version"] = options.build_description.empty() ? options.program_version : options.build_description;
+  e["machine"] = MachineJson();
+  e["jobs"] = options.jobs;
+  e["shard"] = fmt::format("{}/{}", options.shard + 1, options.num_shards);
+  json sweep_keys = json::array(), baseline = json::object();
+  for (const auto& [key, values] : config.sweep.values) {
+    sweep_keys.push_back(key);
+    const auto [section, field] = SplitKey(key, "sweep");
+    const json sec = SectionOf(config, section);
+    baseline[key] = sec.contains(field) ? sec[field] : json(nullptr);
+  }
+  e["sweep"] = json{{"mode", config.sweep.mode}, {"keys", sweep_keys}};
+  e["baseline"] = baseline;
+  json sections = json::object();
+  for (const auto& [k, v] : config.sections) sections[k] = v;
+  e["sections"] = sections;
+  for (const char* k : {"table", "figures", "claims"}) e[k] = config.report.contains(k) ? config.report[k] : json::array();
+  e["runs"] = runs_ok;
+  e["runs_failed"] = runs_failed;
+  e["complete"] = runs_failed.empty();
+  WriteJsonFile(options.out / "experiment.json", e);
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+  return summary;
+}
+
+}  // namespace crease

@@ -1,0 +1,167 @@
+// The experiment runner (issue 7): one YAML config per paper figure or ablation
+// (experiments/*.yaml), expanded into runs (sweep point × seed), each run a chain of
+// cached stages that are crease's own commands:
+//
+//   rig ─► scans ─► model ─────────────┐
+//    │                                 ├─► capture ─► eval      (per test actor)
+//    ├─► tracker ──────────────────────┤
+//    └─► actor ─► sequence ────────────┘
+//
+// Every stage is cached under cache/<stage>/<key>/, the key a hash of everything the
+// stage depends on: its own options, the keys of the stages it reads and crease's
+// version number (not the code: clear the cache, or set `cache_salt`, after changing
+// the method). A stage folder is complete when its stage.json (the key, the command,
+// the time it took) exists; an incomplete one is removed and rebuilt, so a rerun after
+// a crash resumes where it stopped. A sweep over capture options trains once.
+//
+// The stages are run as subprocesses of the crease program itself, so every result
+// carries the exact commands that made it and a researcher can rerun any one of them.
+// Tests substitute a StageExecutor that does not spawn processes.
+//
+// Config (YAML; every key is checked, an unknown one is an error naming it):
+//   name, title, paper, description    text for the report
+//   seeds: N                           independent actor sets (training and test actors)
+//   dataset: {...}                     ExperimentDataset below
+//   rig / actor / test_actor / scans_studio / studio / training / tracker / capture / eval:
+//                                      options of the stage by field name (the structs of
+//                                      synth/procedural_rig.h, synth/actor.h, synth/studio.h,
+//                                      pipeline/training/trainer.h, eval/tracker_training.h,
+//                                      pipeline/capture/capture.h, eval/capture_metrics.h)
+//   sweep: {mode: none|list|grid, values: {section.field: [v, …], …}}
+//       list: each key on its own, the others at their base value (a one-at-a-time
+//       ablation); grid: the Cartesian product.
+//   profiles: {quick: {set: {section.field: v}, sweep: {section.field: [...]}, seeds: N}, paper: {...}}
+//   table, figures, claims: passed to the report (reports/make_report.py) as they are.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "core/options.h"
+
+namespace crease {
+
+// The studio data and the method's inputs of one run (section `dataset`).
+struct ExperimentDataset {
+  int training_actors = 4;           // scan-set actors (the paper: 4)
+  int64_t training_seed = 100;       // first training actor seed (seed s adds 1000·(s−1))
+  int scan_cameras = 3;              // cameras per scan
+  std::vector<std::string> scan_lights = {"studio"};  // light rigs each scan is imaged under
+  std::vector<std::string> scan_expressions;          // "name=w,…" per scan; empty: the studio's default 4
+  int scan_samples = 2;              // anti-aliasing samples per pixel axis of the scan images
+  bool capture = true;               // false: the run ends at the model (training-only experiments)
+  int test_actors = 1;               // novel actors captured per run (metrics are averaged over them)
+  int64_t test_seed = 5000;          // first test actor seed (seed s adds 1000·(s−1))
+  std::string preset = "workout-talking";  // the studio sequence preset captured
+  double seconds = 0.0;              // preset length (0: the preset's own)
+  int frames = -1;                   // render at most this many frames (−1: all)
+  std::string light;                 // light rig of the sequence when it keys none ("" = studio)
+  std::string landmarks = "regressor";  // regressor | dlib | ground-truth-prior
+  double landmark_noise_px = 0.0;    // ground-truth-prior noise, px
+  int64_t tracker_seed = 1;          // seed of the landmark regressor's training (fixed across seeds)
+  int mesh_every = 10;               // meshes written (and surface-evaluated) every N frames
+  std::string cache_salt;            // change to invalidate the cache after changing the method
+  void VisitFields(OptionVisitor& v);
+  void Check() const;
+};
+
+struct ExperimentSweep {
+  std::string mode = "none";                                  // none | list | grid
+  std::vector<std::pair<std::string, nlohmann::json>> values;  // key → JSON array, in config order
+};
+
+struct ExperimentConfig {
+  std::string name, title, paper, description;
+  std::filesystem::path source;  // the YAML file
+  int seeds = 1;
+  // Stage option sections by name, each a JSON object of field → value (validated).
+  std::map<std::string, nlohmann::json> sections;
+  ExperimentSweep sweep;
+  nlohmann::json profiles = nlohmann::json::object();
+  nlohmann::json report = nlohmann::json::object();  // table, figures, claims
+};
+
+// The option sections a config may hold, in stage order.
+const std::vector<std::string>& ExperimentSections();
+
+// Parses and validates a config (YAML text); `what` names it in errors.
+ExperimentConfig ParseExperimentConfig(const std::string& yaml_text, const std::string& what);
+ExperimentConfig ReadExperimentConfig(const std::filesystem::path& path);
+
+// Applies profile `profile` ("" = none; a name the config lacks is an error).
+ExperimentConfig ApplyProfile(const ExperimentConfig& config, const std::string& profile);
+
+// One run: a sweep point and a seed.
+struct ExperimentRun {
+  std::string id;              // e.g. "training.num_ferns=80_seed1"
+  int seed = 1;
+  nlohmann::json point;        // {section.field: value}
+  ExperimentConfig resolved;   // config with the point applied
+};
+
+// The runs in a deterministic order (sweep points in config order, then seeds).
+std::vector<ExperimentRun> ExpandRuns(const ExperimentConfig& config);
+
+// Runs i, i + n, i + 2n, … of `runs` (shard i of n, 0-based i).
+std::vector<ExperimentRun> ShardRuns(const std::vector<ExperimentRun>& runs, int shard, int num_shards);
+
+// One cached stage: what it depends on and the command that makes it.
+struct ExperimentStage {
+  std::string kind;                 // rig, scans, model, tracker, actor, sequence, capture, eval
+  nlohmann::json key_inputs;        // everything the output depends on
+  std::string key;                  // 16 hex digits of a 64-bit hash of key_inputs
+  std::filesystem::path dir;        // cache/<kind>/<key>
+  std::vector<std::string> argv;    // crease arguments (without the program)
+  std::vector<std::string> depends; // keys of the stages it reads
+};
+
+// A stable 64-bit FNV-1a hash of `j.dump()` (keys are sorted), as 16 hex digits.
+std::string ExperimentKey(const nlohmann::json& j);
+
+// The stages of a run (deduplicated by key across runs by the caller), in order.
+// `program_version` enters every key.
+std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const std::filesystem::path& cache,
+                                           const std::string& program_version);
+
+// Runs `argv` (crease arguments) with stdout and stderr to `log`; returns the exit
+// status (0 = success). The default spawns the crease program `program`.
+using StageExecutor = std::function<int(const std::vector<std::string>& argv, const std::filesystem::path& log)>;
+StageExecutor SubprocessExecutor(const std::filesystem::path& program);
+
+struct ExperimentRunnerOptions {
+  std::filesystem::path out;       // experiment results folder
+  std::filesystem::path cache;     // stage cache (shared between experiments)
+  std::string profile;             // "" | quick | paper
+  int seeds = 0;                   // > 0 overrides the config's
+  int jobs = 1;                    // stages run at once
+  int shard = 0, num_shards = 1;   // run only this slice of the runs
+  std::string program_version;     // enters every cache key (crease's version number)
+  std::string build_description;   // recorded only (version + git)
+  std::string command;             // the command line, recorded for the report
+  std::function<void(const std::string&)> log;  // progress lines (may be empty)
+};
+
+struct ExperimentSummary {
+  int runs = 0, runs_ok = 0, runs_failed = 0;
+  int stages = 0, stages_cached = 0, stages_run = 0, stages_failed = 0;
+  double seconds = 0.0;
+};
+
+// Plans, runs (cached) and collects an experiment: out/runs/<id>.json per run,
+// out/results.csv and out/experiment.json (what reports/make_report.py reads).
+ExperimentSummary RunExperiment(const ExperimentConfig& config, const ExperimentRunnerOptions& options,
+                                const StageExecutor& executor);
+
+// Metrics of a finished run from its stage folders: model report (PCA energy,
+// training time) and the mean over its eval.json files (tracking, displacement,
+// surface, speed), flattened to dotted keys; curves: pca_energy and the first
+// sequence's per-frame errors. Exposed for tests.
+nlohmann::json CollectRunMetrics(const std::vector<ExperimentStage>& stages);
+
+}  // namespace crease

@@ -1,0 +1,278 @@
+// The experiment runner (eval/experiment.h): config checking, sweeps, shards,
+// cache keys, resume. Stages run through a fake executor that writes small,
+// deterministic outputs (the real commands are exercised by cli_test.sh).
+#include "eval/experiment.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <algorithm>
+#include <set>
+
+#include "core/error.h"
+#include "core/json_io.h"
+
+namespace crease {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+const char* kConfig = R"(
+name: toy
+title: A toy sweep
+paper: Sec. 4.3
+seeds: 2
+dataset:
+  training_actors: 2
+  test_actors: 2
+  frames: 12
+training:
+  num_ferns: 1280
+sweep:
+  mode: list
+  values:
+    training.num_ferns: [80, 320]
+    capture.wrinkle_frames: [5, 10]
+profiles:
+  quick:
+    set:
+      dataset.frames: 6
+    sweep:
+      training.num_ferns: [40]
+    seeds: 1
+claims:
+  - id: c
+    paper: something
+    check: {less: [tracking.refined_px, tracking.coarse_px]}
+)";
+
+fs::path TempDir(const std::string& name) {
+  const fs::path d = fs::temp_directory_path() / ("crease_experiment_test_" + name);
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+std::string OutputAfter(const std::vector<std::string>& argv, const std::string& flag) {
+  for (size_t i = 0; i + 1 < argv.size(); ++i)
+    if (argv[i] == flag) return argv[i + 1];
+  return "";
+}
+
+// Writes what each stage's reader expects: the model report and eval.json, with
+// numbers derived from the command (so a changed input changes the result).
+int FakeExecute(const std::vector<std::string>& argv, const fs::path& log) {
+  std::ofstream(log) << "fake " << argv.size() << " args\n";
+  std::string all;  // the command without its paths (they name the cache folder)
+  for (const auto& a : argv)
+    if (a.find('/') == std::string::npos) all += a + " ";
+  const double h = static_cast<double>(std::hash<std::string>{}(all) % 1000) / 1000.0;
+  if (argv[0] == "train") {
+    const fs::path report = OutputAfter(argv, "--report");
+    fs::create_directories(report);
+    WriteJsonFile(report / "report.json", json{{"pca_energy", {0.5, 0.8, 0.9, 1.0}}, {"seconds", 1.5 + h}});
+  } else if (argv[0] == "eval") {
+    const fs::path out = OutputAfter(argv, "-o");
+    WriteJsonFile(out / "eval.json",
+                  json{{"tracking", {{"coarse_px", 6.0 + h}, {"refined_px", 5.0 + h}}},
+                       {"per_frame", json::array({json{{"frame", 0}, {"refined_px", 1.0}}, json{{"frame", 1}, {"refined_px", nullptr}}})}});
+  }
+  return 0;
+}
+
+TEST(Experiment, ParsesAConfigAndExpandsAListSweepOverSeeds) {
+  const ExperimentConfig c = ParseExperimentConfig(kConfig, "toy.yaml");
+  EXPECT_EQ(c.name, "toy");
+  EXPECT_EQ(c.sweep.mode, "list");
+  const auto runs = ExpandRuns(c);
+  ASSERT_EQ(runs.size(), 8u);  // (2 + 2 points) × 2 seeds
+  EXPECT_EQ(runs[0].id, "training.num_ferns=80_seed1");
+  EXPECT_EQ(runs[1].id, "training.num_ferns=80_seed2");
+  EXPECT_EQ(runs[4].id, "capture.wrinkle_frames=5_seed1");
+  // A list sweep varies one key at a time: the others keep their base value.
+  EXPECT_EQ(runs[4].resolved.sections.at("training").at("num_ferns"), 1280);
+  EXPECT_EQ(runs[0].resolved.sections.at("training").at("num_ferns"), 80);
+}
+
+TEST(Experiment, GridSweepIsTheCartesianProduct) {
+  std::string yaml = kConfig;
+  yaml.replace(yaml.find("mode: list"), 10, "mode: grid");
+  const auto runs = ExpandRuns(ParseExperimentConfig(yaml, "grid.yaml"));
+  ASSERT_EQ(runs.size(), 8u);  // 2 × 2 points × 2 seeds
+  EXPECT_EQ(runs[0].id, "training.num_ferns=80_capture.wrinkle_frames=5_seed1");
+  EXPECT_EQ(runs[0].resolved.sections.at("capture").at("wrinkle_frames"), 5);
+}
+
+TEST(Experiment, ProfilesOverrideValuesSweepsAndSeeds) {
+  const ExperimentConfig c = ApplyProfile(ParseExperimentConfig(kConfig, "toy.yaml"), "quick");
+  EXPECT_EQ(c.seeds, 1);
+  EXPECT_EQ(c.sections.at("dataset").at("frames"), 6);
+  const auto runs = ExpandRuns(c);
+  ASSERT_EQ(runs.size(), 3u);  // num_ferns [40] + wrinkle_frames [5, 10]
+  EXPECT_EQ(runs[0].id, "training.num_ferns=40_seed1");
+  // "paper" is not in the config: the config's own values are the paper profile.
+  EXPECT_EQ(ExpandRuns(ApplyProfile(ParseExperimentConfig(kConfig, "toy.yaml"), "paper")).size(), 8u);
+  EXPECT_THROW(ApplyProfile(ParseExperimentConfig(kConfig, "toy.yaml"), "huge"), Error);
+}
+
+void ExpectErrorNaming(const std::string& yaml, const std::string& needle) {
+  try {
+    ParseExperimentConfig(yaml, "bad.yaml");
+    FAIL() << "no error for a config that should name " << needle;
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("bad.yaml"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Experiment, BadConfigsGiveErrorsNamingTheOption) {
+  ExpectErrorNaming("name: x\ntraining: {num_fern: 3}\n", "num_fern");
+  ExpectErrorNaming("name: x\ntrainnig: {num_ferns: 3}\n", "trainnig");
+  ExpectErrorNaming("name: x\nsweep: {values: {training.nope: [1]}}\n", "nope");
+  ExpectErrorNaming("name: x\nsweep: {values: {training.num_ferns: [-1]}}\n", "num_ferns");
+  ExpectErrorNaming("name: x\nsweep: {values: {num_ferns: [1]}}\n", "SECTION.FIELD");
+  ExpectErrorNaming("name: x\nsweep: {values: {training.num_ferns: []}}\n", "non-empty");
+  ExpectErrorNaming("name: x\nsweep: {mode: diagonal}\n", "diagonal");
+  ExpectErrorNaming("name: x\ndataset: {preset: dancing}\n", "dancing");
+  ExpectErrorNaming("name: x\nprofiles: {quick: {set: {capture.bogus: 1}}}\n", "bogus");
+  ExpectErrorNaming("title: no name\n", "name");
+  ExpectErrorNaming("name: [unclosed\n", "YAML");
+}
+
+TEST(Experiment, ShardsTogetherEqualTheWhole) {
+  const auto runs = ExpandRuns(ParseExperimentConfig(kConfig, "toy.yaml"));
+  std::multiset<std::string> ids;
+  for (int i = 0; i < 3; ++i)
+    for (const auto& r : ShardRuns(runs, i, 3)) ids.insert(r.id);
+  std::multiset<std::string> all;
+  for (const auto& r : runs) all.insert(r.id);
+  EXPECT_EQ(ids, all);
+  EXPECT_EQ(ShardRuns(runs, 0, 3).size(), 3u);
+  EXPECT_EQ(ShardRuns(runs, 2, 3).size(), 2u);
+  EXPECT_THROW(ShardRuns(runs, 3, 3), Error);
+}
+
+std::map<std::string, std::string> KeysByKind(const std::vector<ExperimentStage>& stages) {
+  std::map<std::string, std::string> keys;
+  for (const auto& s : stages) keys[s.kind] += s.key + ";";
+  return keys;
+}
+
+TEST(Experiment, CacheKeysChangeExactlyWithTheirInputs) {
+  const ExperimentConfig c = ParseExperimentConfig(kConfig, "toy.yaml");
+  const auto runs = ExpandRuns(c);
+  const fs::path cache = "/tmp/cache";
+  // Same inputs → same keys (and the plan is deterministic).
+  EXPECT_EQ(KeysByKind(PlanRunStages(runs[0], cache, "1")), KeysByKind(PlanRunStages(runs[0], cache, "1")));
+  // A capture option (run 4: wrinkle_frames=5 at base num_ferns) vs the base of run
+  // 0's sweep key: a different training (num_ferns 80 vs 1280) changes the model,
+  // capture and eval, never the rig, scans, tracker, actors or sequences.
+  const auto a = KeysByKind(PlanRunStages(runs[0], cache, "1"));
+  const auto b = KeysByKind(PlanRunStages(runs[4], cache, "1"));
+  for (const char* same : {"rig", "scans", "tracker", "actor", "sequence"}) EXPECT_EQ(a.at(same), b.at(same)) << same;
+  for (const char* diff : {"model", "capture", "eval"}) EXPECT_NE(a.at(diff), b.at(diff)) << diff;
+  // Two capture settings share everything up to the capture.
+  const auto c5 = KeysByKind(PlanRunStages(runs[4], cache, "1"));
+  const auto c10 = KeysByKind(PlanRunStages(runs[6], cache, "1"));
+  for (const char* same : {"rig", "scans", "model", "tracker", "actor", "sequence"})
+    EXPECT_EQ(c5.at(same), c10.at(same)) << same;
+  EXPECT_NE(c5.at("capture"), c10.at("capture"));
+  // Another seed: other actors, so other scans, model, actors, sequences; same rig and tracker.
+  const auto s2 = KeysByKind(PlanRunStages(runs[1], cache, "1"));
+  EXPECT_EQ(a.at("rig"), s2.at("rig"));
+  EXPECT_EQ(a.at("tracker"), s2.at("tracker"));
+  EXPECT_NE(a.at("scans"), s2.at("scans"));
+  EXPECT_NE(a.at("sequence"), s2.at("sequence"));
+  // crease's version enters every key.
+  const auto v2 = KeysByKind(PlanRunStages(runs[0], cache, "2"));
+  for (const auto& [kind, key] : a) EXPECT_NE(key, v2.at(kind)) << kind;
+  // The studio's options reach the sequence, not the training scans.
+  ExperimentConfig lit = c;
+  lit.sections["studio"] = json{{"light", "raking-above"}};
+  const auto l = KeysByKind(PlanRunStages(ExpandRuns(lit)[0], cache, "1"));
+  EXPECT_EQ(a.at("model"), l.at("model"));
+  EXPECT_NE(a.at("sequence"), l.at("sequence"));
+  // Two test actors per run: two actors, sequences, captures and evals.
+  EXPECT_EQ(std::count(a.at("eval").begin(), a.at("eval").end(), ';'), 2);
+}
+
+json RunJsonWithoutTimes(const fs::path& file) {
+  json j = ReadJsonFile(file);
+  j.erase("stage_seconds");
+  j.erase("commands");  // they name the cache folder
+  return j;
+}
+
+TEST(Experiment, ARunResumedAfterAFailureEqualsAnUninterruptedOne) {
+  const ExperimentConfig c = ParseExperimentConfig(kConfig, "toy.yaml");
+  const fs::path root = TempDir("resume");
+  ExperimentRunnerOptions o;
+  o.program_version = "test";
+  o.jobs = 2;
+
+  o.out = root / "whole";
+  o.cache = root / "cache_whole";
+  int calls_whole = 0;
+  const ExperimentSummary whole = RunExperiment(c, o, [&](const auto& argv, const auto& log) {
+    ++calls_whole;
+    return FakeExecute(argv, log);
+  });
+  EXPECT_EQ(whole.runs_ok, 8);
+  EXPECT_EQ(whole.stages_failed, 0);
+
+  // Interrupted: every capture fails (as if the machine died there).
+  o.out = root / "resumed";
+  o.cache = root / "cache_resumed";
+  const ExperimentSummary broken = RunExperiment(c, o, [&](const auto& argv, const auto& log) {
+    if (argv[0] == "capture") return 1;
+    return FakeExecute(argv, log);
+  });
+  EXPECT_EQ(broken.runs_ok, 0);
+  EXPECT_GT(broken.stages_failed, 0);
+  const json failed = ReadJsonFile(o.out / "runs" / "training.num_ferns=80_seed1.json");
+  EXPECT_EQ(failed.at("status"), "failed");
+  EXPECT_NE(failed.at("error").get<std::string>().find("capture stage failed"), std::string::npos);
+
+  // The rerun only runs what is missing: captures and evals.
+  int calls = 0;
+  const ExperimentSummary resumed = RunExperiment(c, o, [&](const auto& argv, const auto& log) {
+    ++calls;
+    EXPECT_TRUE(argv[0] == "capture" || argv[0] == "eval") << argv[0];
+    return FakeExecute(argv, log);
+  });
+  EXPECT_EQ(resumed.runs_ok, 8);
+  EXPECT_EQ(resumed.stages_cached + resumed.stages_run, resumed.stages);
+  EXPECT_EQ(calls, resumed.stages_run);
+  EXPECT_LT(calls, calls_whole);
+  for (const auto& e : fs::directory_iterator(root / "whole" / "runs"))
+    EXPECT_EQ(RunJsonWithoutTimes(e.path()), RunJsonWithoutTimes(o.out / "runs" / e.path().filename()))
+        << e.path().filename();
+
+  // A third run is all cache.
+  const ExperimentSummary again = RunExperiment(c, o, [&](const auto&, const auto&) -> int {
+    ADD_FAILURE() << "a cached stage ran again";
+    return 1;
+  });
+  EXPECT_EQ(again.stages_cached, again.stages);
+
+  // What the report reads.
+  const json e = ReadJsonFile(o.out / "experiment.json");
+  EXPECT_EQ(e.at("runs").size(), 8u);
+  EXPECT_EQ(e.at("sweep").at("keys"), json::array({"training.num_ferns", "capture.wrinkle_frames"}));
+  EXPECT_EQ(e.at("baseline").at("training.num_ferns"), 1280);
+  EXPECT_EQ(e.at("claims").size(), 1u);
+  const json run = ReadJsonFile(o.out / "runs" / "capture.wrinkle_frames=5_seed1.json");
+  EXPECT_EQ(run.at("metrics").at("model.pca_dims_85"), 3);
+  EXPECT_GT(run.at("metrics").at("tracking.coarse_px").get<double>(), 6.0);
+  EXPECT_EQ(run.at("curves").at("per_frame.refined_px"), json::array({1.0, nullptr}));
+  std::ifstream csv(o.out / "results.csv");
+  std::string header;
+  std::getline(csv, header);
+  EXPECT_EQ(header.rfind("run_id,seed,status,training.num_ferns,capture.wrinkle_frames,", 0), 0u) << header;
+  fs::remove_all(root);
+}
+
+}  // namespace
+}  // namespace crease
