@@ -620,7 +620,10 @@ json CollectRunMetrics(const std::vector<ExperimentStage>& stages) {
       Flatten(r, "model", &flat);
       for (const auto& [k, v] : flat.items()) metrics[k] = v;
       if (r.contains("pca_energy") && r["pca_energy"].is_array()) {
-        curves["pca_energy"] = r["pca_energy"];
+        // The first 64 dimensions (a 32² patch has 1024; the report plots the knee).
+        json energy = json::array();
+        for (size_t i = 0; i < std::min<size_t>(64, r["pca_energy"].size()); ++i) energy.push_back(r["pca_energy"][i]);
+        curves["pca_energy"] = energy;
         int dims = -1;
         for (size_t i = 0; i < r["pca_energy"].size(); ++i) {
           if (r["pca_energy"][i].get<double>() >= 0.85) {
@@ -652,16 +655,19 @@ json CollectRunMetrics(const std::vector<ExperimentStage>& stages) {
   }
   for (const auto& [k, acc] : sums) metrics[k] = acc.first / acc.second;
   if (!evals.empty() && evals.front().contains("per_frame") && evals.front()["per_frame"].is_array()) {
-    const json& pf = evals.front()["per_frame"];
+    // Each numeric field of the frames (nested ones as a.b.c), null where a frame lacks it.
+    std::vector<json> frames;
     std::set<std::string> fields;
-    for (const auto& f : pf)
-      if (f.is_object())
-        for (const auto& [k, v] : f.items())
-          if (v.is_number() || v.is_null()) fields.insert(k);
+    for (const auto& f : evals.front()["per_frame"]) {
+      json flat = json::object();
+      Flatten(f, "", &flat);
+      for (const auto& [k, v] : flat.items()) fields.insert(k);
+      frames.push_back(std::move(flat));
+    }
     for (const auto& field : fields) {
-      if (field == "frame") continue;
+      if (field == "frame" || field.ends_with("texels") || field.ends_with("samples")) continue;
       json series = json::array();
-      for (const auto& f : pf) series.push_back(f.is_object() && f.contains(field) ? f[field] : json(nullptr));
+      for (const auto& f : frames) series.push_back(f.contains(field) ? f[field] : json(nullptr));
       curves["per_frame." + field] = series;
     }
   }

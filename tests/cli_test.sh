@@ -129,5 +129,24 @@ bad "train-tracker bad option" "num_ferns" "$crease" train-tracker --data "$tmp"
 bad "train-tracker missing folder" "not a folder of labelled faces" "$crease" train-tracker --data "$tmp/none" --out "$tmp/t.ctrk"
 [ ! -e "$tmp/t.ctrk" ] || { echo "FAIL: tracker written despite an error"; fails=$((fails+1)); }
 
+# Experiments (issue 7): the configs parse, a bad config names its option, and the
+# tiny config runs every stage as the real command, resumes from its cache and reports.
+ok "experiment list" "$crease" experiment list
+ok "experiment dry run" "$crease" experiment run all --profile quick --dry-run -o "$tmp/exp"
+printf 'name: bad\ntraining: {num_fern: 3}\n' > "$tmp/bad.yaml"
+bad "experiment unknown option" "num_fern" "$crease" experiment run "$tmp/bad.yaml" --dry-run
+printf 'name: bad\nsweep: {values: {capture.wrinkle_frames: [0]}}\n' > "$tmp/badsweep.yaml"
+bad "experiment bad sweep" "wrinkle_frames" "$crease" experiment run "$tmp/badsweep.yaml" --dry-run
+bad "experiment unknown name" "no such config" "$crease" experiment run nope
+bad "experiment bad shard" "--shard" "$crease" experiment run tracking-refinement --shard 3 --dry-run
+ok "experiment run (tiny, real stages)" "$crease" experiment run "$data/../tests/data/experiment_tiny.yaml" -o "$tmp/exp"
+[ -s "$tmp/exp/tiny/results.csv" ] && [ -s "$tmp/exp/tiny/runs/capture.refine=true_seed1.json" ] ||
+  { echo "FAIL: experiment wrote no results"; fails=$((fails+1)); }
+ok "experiment rerun (all cached)" "$crease" experiment run "$data/../tests/data/experiment_tiny.yaml" -o "$tmp/exp"
+grep -q "9 stages (9 cached, 0 run, 0 failed)" "$tmp/out" || { echo "FAIL: rerun did not reuse the cache"; cat "$tmp/out"; fails=$((fails+1)); }
+ok "report" "$crease" report "$tmp/exp/tiny"
+grep -q "refine" "$tmp/exp/tiny/report.md" && [ -s "$tmp/exp/tiny/figures/tiny_err.png" ] ||
+  { echo "FAIL: report lacks the claim or the figure"; fails=$((fails+1)); }
+
 echo "$passes passed, $fails failed"
 [ "$fails" -eq 0 ]
