@@ -2,7 +2,7 @@
 // (experiments/*.yaml), expanded into runs (sweep point × seed), each run a chain of
 // cached stages that are crease's own commands:
 //
-//   rig ─► scans ─► model ─────────────┐
+//   rig ─► scans ─► pairs ─► model ────┐
 //    │                                 ├─► capture ─► eval      (per test actor)
 //    ├─► tracker ──────────────────────┤
 //    └─► actor ─► sequence ────────────┘
@@ -113,7 +113,7 @@ std::vector<ExperimentRun> ShardRuns(const std::vector<ExperimentRun>& runs, int
 
 // One cached stage: what it depends on and the command that makes it.
 struct ExperimentStage {
-  std::string kind;                 // rig, scans, model, tracker, actor, sequence, capture, eval
+  std::string kind;                 // rig, scans, pairs, model, tracker, actor, sequence, capture, eval
   nlohmann::json key_inputs;        // everything the output depends on
   std::string key;                  // 16 hex digits of a 64-bit hash of key_inputs
   std::filesystem::path dir;        // cache/<kind>/<key>

@@ -143,7 +143,7 @@ ok "experiment run (tiny, real stages)" "$crease" experiment run "$data/../tests
 [ -s "$tmp/exp/tiny/results.csv" ] && [ -s "$tmp/exp/tiny/runs/capture.refine=true_seed1.json" ] ||
   { echo "FAIL: experiment wrote no results"; fails=$((fails+1)); }
 ok "experiment rerun (all cached)" "$crease" experiment run "$data/../tests/data/experiment_tiny.yaml" -o "$tmp/exp"
-grep -q "9 stages (9 cached, 0 run, 0 failed)" "$tmp/out" || { echo "FAIL: rerun did not reuse the cache"; cat "$tmp/out"; fails=$((fails+1)); }
+grep -q "10 stages (10 cached, 0 run, 0 failed)" "$tmp/out" || { echo "FAIL: rerun did not reuse the cache"; cat "$tmp/out"; fails=$((fails+1)); }
 ok "report" "$crease" report "$tmp/exp/tiny"
 grep -q "refine" "$tmp/exp/tiny/report.md" && [ -s "$tmp/exp/tiny/figures/tiny_err.png" ] ||
   { echo "FAIL: report lacks the claim or the figure"; fails=$((fails+1)); }

@@ -72,7 +72,12 @@ int FakeExecute(const std::vector<std::string>& argv, const fs::path& log) {
   if (argv[0] == "train") {
     const fs::path report = OutputAfter(argv, "--report");
     fs::create_directories(report);
-    WriteJsonFile(report / "report.json", json{{"pca_energy", {0.5, 0.8, 0.9, 1.0}}, {"seconds", 1.5 + h}});
+    if (OutputAfter(argv, "--pairs").empty()) {  // extraction only
+      EXPECT_FALSE(OutputAfter(argv, "--save-pairs").empty());
+      WriteJsonFile(report / "report.json", json{{"training_pairs", 100}, {"seconds", 50.0 + h}});
+    } else {
+      WriteJsonFile(report / "report.json", json{{"pca_energy", {0.5, 0.8, 0.9, 1.0}}, {"seconds", 1.5 + h}});
+    }
   } else if (argv[0] == "eval") {
     const fs::path out = OutputAfter(argv, "-o");
     WriteJsonFile(out / "eval.json",
@@ -171,7 +176,8 @@ TEST(Experiment, CacheKeysChangeExactlyWithTheirInputs) {
   // capture and eval, never the rig, scans, tracker, actors or sequences.
   const auto a = KeysByKind(PlanRunStages(runs[0], cache, "1"));
   const auto b = KeysByKind(PlanRunStages(runs[4], cache, "1"));
-  for (const char* same : {"rig", "scans", "tracker", "actor", "sequence"}) EXPECT_EQ(a.at(same), b.at(same)) << same;
+  for (const char* same : {"rig", "scans", "pairs", "tracker", "actor", "sequence"})
+    EXPECT_EQ(a.at(same), b.at(same)) << same;
   for (const char* diff : {"model", "capture", "eval"}) EXPECT_NE(a.at(diff), b.at(diff)) << diff;
   // Two capture settings share everything up to the capture.
   const auto c5 = KeysByKind(PlanRunStages(runs[4], cache, "1"));
@@ -265,6 +271,7 @@ TEST(Experiment, ARunResumedAfterAFailureEqualsAnUninterruptedOne) {
   EXPECT_EQ(e.at("claims").size(), 1u);
   const json run = ReadJsonFile(o.out / "runs" / "capture.wrinkle_frames=5_seed1.json");
   EXPECT_EQ(run.at("metrics").at("model.pca_dims_85"), 3);
+  EXPECT_EQ(run.at("metrics").at("pairs.training_pairs"), 100);
   EXPECT_GT(run.at("metrics").at("tracking.coarse_px").get<double>(), 6.0);
   EXPECT_EQ(run.at("curves").at("per_frame.refined_px"), json::array({1.0, nullptr}));
   std::ifstream csv(o.out / "results.csv");

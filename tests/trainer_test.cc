@@ -165,6 +165,42 @@ TEST(Trainer, SameInputsSameModelBytes) {
   EXPECT_TRUE(a.pca == b.pca);
 }
 
+TEST(Trainer, SavedPairsRetrainTheSameRegressorAndRefuseOtherExtraction) {
+  const ScanSet set = ReadScanSet(TinyScans());
+  const fs::path dir = testing::TestDir();
+  TrainingOptions o = TinyOptions();
+  o.ferns.num_ferns = 10;
+  o.pca.dimensions = 6;
+  const TrainingPairs pairs = ExtractTrainingPairs(set, Rig(), o, {}, nullptr);
+  ASSERT_GT(pairs.texture.rows(), 1);
+  WriteTrainingPairs(dir / "p.cpr", pairs);
+  const TrainingPairs back = ReadTrainingPairs(dir / "p.cpr");
+  EXPECT_EQ(back.texture, pairs.texture);
+  EXPECT_EQ(back.displacement, pairs.displacement);
+  // From the pairs, with the regression options changed: the same model as training
+  // from the scans with those options.
+  const TrainingOptions edited =
+      OptionsForPairs(back, "p.cpr", [](TrainingOptions* t) { t->ferns.num_ferns = 12; });
+  TrainingOptions direct = o;
+  direct.ferns.num_ferns = 12;
+  const DetailModel a = TrainDetailModelFromPairs(back, edited, {}, nullptr);
+  const DetailModel b = TrainDetailModel(set, Rig(), direct, {}, nullptr);
+  EXPECT_EQ(a.cascade, b.cascade);
+  EXPECT_TRUE(a.pca == b.pca);
+  // An extraction option cannot change without extracting again.
+  try {
+    OptionsForPairs(back, "p.cpr", [](TrainingOptions* t) { t->patch.patch_size = 16; });
+    FAIL() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("patch_size"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("p.cpr"), std::string::npos) << e.what();
+  }
+  // A truncated file is an error naming it.
+  const std::string bytes = ReadFileToString(dir / "p.cpr");
+  std::ofstream(dir / "cut.cpr", std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  EXPECT_THROW(ReadTrainingPairs(dir / "cut.cpr"), Error);
+}
+
 TEST(Trainer, BadScanSets) {
   const fs::path dir = testing::TestDir();
   EXPECT_ERROR_HAS(ReadScanSet(dir / "missing"), "not a folder");

@@ -21,39 +21,76 @@ namespace fs = std::filesystem;
 void AddTrainCommands(CLI::App& app) {
   {
     auto* cmd = app.add_subcommand("train", "Train the detail model (paper Sec. 4) on a scan set");
-    static std::string scans, rig_path, out, config, report;
+    static std::string scans, rig_path, out, config, report, pairs_in, pairs_out;
     static std::vector<std::string> sets;
-    cmd->add_option("--scans", scans, "Scan set folder (scans.json; e.g. from `crease synth scans`)")->required();
+    auto* scans_opt = cmd->add_option("--scans", scans, "Scan set folder (scans.json; e.g. from `crease synth scans`)");
+    auto* pairs_opt = cmd->add_option("--pairs", pairs_in,
+                                      "Train the PCA and the cascade (Sec. 4.3) from saved training pairs instead of "
+                                      "scans; only PCA and cascade options may then change");
+    scans_opt->excludes(pairs_opt);
+    cmd->add_option("--save-pairs", pairs_out,
+                    "Also save the training pairs (t_i, d_i of Sec. 4.2; CREASPRS file); without --out, stop there");
     cmd->add_option("--rig", rig_path, "The tracker's rig (.crig); default: the rig the scan set names");
-    cmd->add_option("--out,-o", out, "Model file to write (.cdm)")->required();
+    cmd->add_option("--out,-o", out, "Model file to write (.cdm)");
     cmd->add_option("--config", config, "Training options (YAML; keys: pipeline/training/trainer.h TrainingOptions)");
     cmd->add_option("--set", sets, "Training option KEY=VALUE (repeatable), e.g. num_ferns=640 dimensions=8");
     cmd->add_option("--report", report, "Report folder (default: <out without extension>_report)");
     cmd->callback([] {
+      if (scans.empty() == pairs_in.empty()) throw Error("train: give --scans (a scan set) or --pairs (saved pairs)");
+      if (out.empty() && pairs_out.empty()) throw Error("train: give --out (the model) and/or --save-pairs");
+      Require(pairs_in.empty() || pairs_out.empty(), "train: --save-pairs needs --scans");
+      auto apply_user_options = [](TrainingOptions* options) {
+        if (!config.empty()) SetOptionsFromYaml(ReadFileToString(config), config, options);
+        if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", options);
+      };
+      const fs::path out_path(out.empty() ? pairs_out : out);
+      const fs::path report_dir =
+          report.empty() ? out_path.parent_path() / (out_path.stem().string() + "_report") : fs::path(report);
+      auto write_report = [&](const TrainingSummary& summary) {
+        WriteFileAtomic(report_dir / "report.json", [&](std::ostream& o) { o << summary.ToJson(); });
+        const std::string md = summary.ToMarkdown();
+        WriteFileAtomic(report_dir / "report.md", [&](std::ostream& o) { o << md; });
+        std::printf("\n%s\n", md.c_str());
+      };
+      auto line = [](const std::string& l) { std::printf("  %s\n", l.c_str()); };
+      if (!pairs_in.empty()) {
+        const TrainingPairs pairs = ReadTrainingPairs(pairs_in);
+        const TrainingOptions options = OptionsForPairs(pairs, pairs_in, apply_user_options);
+        std::printf("training the PCA and the cascade on %lld pairs of %s\n", static_cast<long long>(pairs.texture.rows()),
+                    pairs_in.c_str());
+        TrainingSummary summary;
+        const DetailModel model = TrainDetailModelFromPairs(pairs, options, {report_dir}, &summary, line);
+        WriteDetailModel(out_path, model);
+        write_report(summary);
+        std::printf("wrote %s and the report in %s\n", out.c_str(), report_dir.string().c_str());
+        return;
+      }
       TrainingOptions options;
-      if (!config.empty()) SetOptionsFromYaml(ReadFileToString(config), config, &options);
-      if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &options);
+      apply_user_options(&options);
       const ScanSet set = ReadScanSet(scans);
       if (rig_path.empty()) {
         Require(!set.rig.empty(), fmt::format("{}: the scan set names no rig; give --rig", scans));
         rig_path = set.rig.string();
       }
       const FaceRig rig = ReadRig(rig_path);
-      const fs::path out_path(out);
-      const fs::path report_dir =
-          report.empty() ? out_path.parent_path() / (out_path.stem().string() + "_report") : fs::path(report);
       std::printf("training on %s: %zu actors, %d scans, lights: %s\n", scans.c_str(), set.actors.size(),
                   set.num_scans(), fmt::format("{}", fmt::join(set.lights(), ", ")).c_str());
       TrainingSummary summary;
-      const DetailModel model = TrainDetailModel(set, rig, options, {report_dir}, &summary,
-                                                 [](const std::string& line) { std::printf("  %s\n", line.c_str()); });
+      const TrainingPairs pairs = ExtractTrainingPairs(set, rig, options, {report_dir}, &summary, line);
+      if (!pairs_out.empty()) {
+        WriteTrainingPairs(pairs_out, pairs);
+        std::printf("wrote %lld training pairs to %s\n", static_cast<long long>(pairs.texture.rows()),
+                    pairs_out.c_str());
+      }
+      if (out.empty()) {
+        write_report(summary);
+        return;
+      }
+      const DetailModel model = TrainDetailModelFromPairs(pairs, options, {report_dir}, &summary, line);
       WriteDetailModel(out_path, model);
       // The compatible rig (Sec. 4.1) for inspection; capture derives it from the model's G.
       WriteRig(report_dir / "compatible_rig.crig", MakeRigCompatible(rig, model.detail));
-      WriteFileAtomic(report_dir / "report.json", [&](std::ostream& o) { o << summary.ToJson(); });
-      const std::string md = summary.ToMarkdown();
-      WriteFileAtomic(report_dir / "report.md", [&](std::ostream& o) { o << md; });
-      std::printf("\n%s\n", md.c_str());
+      write_report(summary);
       std::printf("wrote %s and the report in %s\n", out.c_str(), report_dir.string().c_str());
     });
   }

@@ -10,6 +10,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "core/array_file.h"
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/image_io.h"
@@ -234,9 +235,9 @@ std::string TrainingSummary::ToMarkdown() const {
   return s;
 }
 
-DetailModel TrainDetailModel(const ScanSet& set, const FaceRig& rig, const TrainingOptions& options,
-                             const TrainingOutputs& outputs, TrainingSummary* summary,
-                             const std::function<void(const std::string&)>& log_fn) {
+TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const TrainingOptions& options,
+                                   const TrainingOutputs& outputs, TrainingSummary* summary,
+                                   const std::function<void(const std::string&)>& log_fn) {
   options.Check();
   const auto start = Clock::now();
   auto log = [&](const std::string& line) {
@@ -255,7 +256,7 @@ DetailModel TrainDetailModel(const ScanSet& set, const FaceRig& rig, const Train
 
   std::vector<Eigen::MatrixXf> texture_patches, displacement_patches;
   int total_pairs = 0;
-  int64_t steps = 2;  // every scan, then PCA and the cascade
+  int64_t steps = 0;  // every scan
   for (const auto& a : actors) steps += static_cast<int64_t>(a.scans.size());
   Progress progress("training", steps);
   for (size_t a = 0; a < actors.size(); ++a) {
@@ -447,6 +448,42 @@ DetailModel TrainDetailModel(const ScanSet& set, const FaceRig& rig, const Train
   }
   texture_patches.clear();
   displacement_patches.clear();
+  progress.Finish();
+  TrainingPairs out;
+  out.texture = std::move(T);
+  out.displacement = std::move(Dp);
+  out.options_json = OptionsToJson(options);
+  out.scan_set = set.root.string();
+  out.actors = static_cast<int>(sum.actors.size());
+  for (const auto& a : sum.actors) out.scans += a.scans;
+  out.seconds = Since(start);
+  sum.seconds = out.seconds;
+  return out;
+}
+
+DetailModel TrainDetailModelFromPairs(const TrainingPairs& pairs, const TrainingOptions& options,
+                                      const TrainingOutputs& outputs, TrainingSummary* summary,
+                                      const std::function<void(const std::string&)>& log_fn) {
+  options.Check();
+  const auto start = Clock::now();
+  auto log = [&](const std::string& line) {
+    if (log_fn) log_fn(line);
+  };
+  TrainingSummary local;
+  TrainingSummary& sum = summary ? *summary : local;
+  const bool pictures = !outputs.report_dir.empty();
+  if (pictures) fs::create_directories(outputs.report_dir);
+  const Eigen::MatrixXf& T = pairs.texture;
+  const Eigen::MatrixXf& Dp = pairs.displacement;
+  const int total_pairs = static_cast<int>(T.rows());
+  const int n = options.patch.patch_size * options.patch.patch_size;
+  Require(T.cols() == n && Dp.cols() == n && Dp.rows() == total_pairs,
+          fmt::format("training pairs: {}×{} texture and {}×{} displacement patches, expected N×{} (patch_size {})",
+                      T.rows(), T.cols(), Dp.rows(), Dp.cols(), n, options.patch.patch_size));
+  Require(total_pairs >= 2, fmt::format("training pairs: only {} pairs", total_pairs));
+  sum.training_pairs = total_pairs;
+  const int R = options.detail.map_resolution;
+  Progress progress("regression", 2);
   // --- Sec. 4.3: PCA of the displacement patches and the regression targets ĉ_i.
   auto t0 = Clock::now();
   PcaOptions pca_options = options.pca;
@@ -487,18 +524,126 @@ DetailModel TrainDetailModel(const ScanSet& set, const FaceRig& rig, const Train
   model.wrinkle = options.wrinkle;
   model.patch = options.patch;
   model.detail = options.detail;
-  sum.seconds = Since(start);
+  sum.seconds = pairs.seconds + Since(start);
   json tj;
-  tj["scan_set"] = set.root.string();
-  tj["actors"] = static_cast<int>(sum.actors.size());
-  int scans = 0;
-  for (const auto& a : sum.actors) scans += a.scans;
-  tj["scans"] = scans;
+  tj["scan_set"] = pairs.scan_set;
+  tj["actors"] = pairs.actors;
+  tj["scans"] = pairs.scans;
   tj["training_pairs"] = total_pairs;
   tj["options"] = json::parse(OptionsToJson(options));
   tj["seconds"] = sum.seconds;
   model.training_json = tj.dump();
   return model;
+}
+
+DetailModel TrainDetailModel(const ScanSet& set, const FaceRig& rig, const TrainingOptions& options,
+                             const TrainingOutputs& outputs, TrainingSummary* summary,
+                             const std::function<void(const std::string&)>& log) {
+  TrainingSummary local;
+  TrainingSummary& sum = summary ? *summary : local;
+  const TrainingPairs pairs = ExtractTrainingPairs(set, rig, options, outputs, &sum, log);
+  return TrainDetailModelFromPairs(pairs, options, outputs, &sum, log);
+}
+
+namespace {
+
+// Collects the field names an Options struct visits.
+class NameCollector : public OptionVisitor {
+ public:
+  std::vector<std::string> names;
+  void Field(const char* n, bool&) override { names.emplace_back(n); }
+  void Field(const char* n, int&) override { names.emplace_back(n); }
+  void Field(const char* n, int64_t&) override { names.emplace_back(n); }
+  void Field(const char* n, uint64_t&) override { names.emplace_back(n); }
+  void Field(const char* n, float&) override { names.emplace_back(n); }
+  void Field(const char* n, double&) override { names.emplace_back(n); }
+  void Field(const char* n, std::string&) override { names.emplace_back(n); }
+  void Field(const char* n, std::vector<int>&) override { names.emplace_back(n); }
+  void Field(const char* n, std::vector<double>&) override { names.emplace_back(n); }
+  void Field(const char* n, std::vector<std::string>&) override { names.emplace_back(n); }
+};
+
+constexpr char kPairsMagic[] = "CREASPRS";
+constexpr uint32_t kPairsVersion = 1;
+
+}  // namespace
+
+std::vector<std::string> RegressionOptionNames() {
+  NameCollector c;
+  PcaOptions pca;
+  FernOptions ferns;
+  pca.VisitFields(c);
+  ferns.VisitFields(c);
+  return c.names;
+}
+
+TrainingOptions OptionsForPairs(const TrainingPairs& pairs, const std::string& what,
+                                const std::function<void(TrainingOptions*)>& edit) {
+  TrainingOptions options;
+  SetOptionsFromJson(pairs.options_json, what, &options);
+  const TrainingOptions extracted = options;
+  if (edit) edit(&options);
+  json a = json::parse(OptionsToJson(extracted)), b = json::parse(OptionsToJson(options));
+  for (const auto& name : RegressionOptionNames()) {
+    a.erase(name);
+    b.erase(name);
+  }
+  for (const auto& [key, value] : b.items()) {
+    if (a[key] != value)
+      throw Error(fmt::format("{}: the pairs were extracted with {} = {}, not {}; only the PCA and cascade options ({}) "
+                              "can change without extracting them again (crease train --scans … --save-pairs)",
+                              what, key, a[key].dump(), value.dump(), fmt::join(RegressionOptionNames(), ", ")));
+  }
+  return options;
+}
+
+void WriteTrainingPairs(const fs::path& path, const TrainingPairs& pairs) {
+  json header;
+  header["format"] = "crease training pairs";
+  header["options"] = json::parse(pairs.options_json);
+  header["scan_set"] = pairs.scan_set;
+  header["actors"] = pairs.actors;
+  header["scans"] = pairs.scans;
+  header["seconds"] = pairs.seconds;
+  ArrayFileWriter w(header.dump());
+  // Row-major N × w² (Eigen stores column-major: transpose into a row-major copy).
+  using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  const RowMajor t = pairs.texture, d = pairs.displacement;
+  w.Add("texture", t.data(), {t.rows(), t.cols()});
+  w.Add("displacement", d.data(), {d.rows(), d.cols()});
+  w.Write(path, kPairsMagic, kPairsVersion);
+}
+
+TrainingPairs ReadTrainingPairs(const fs::path& path) {
+  const ArrayFile f = ReadArrayFile(path, kPairsMagic, kPairsVersion, "training pairs");
+  const std::string what = path.string();
+  TrainingPairs p;
+  json header;
+  try {
+    header = json::parse(f.header_json);
+    p.options_json = header.at("options").dump();
+    p.scan_set = header.value("scan_set", "");
+    p.actors = header.value("actors", 0);
+    p.scans = header.value("scans", 0);
+    p.seconds = header.value("seconds", 0.0);
+  } catch (const json::exception& e) {
+    throw Error(fmt::format("{}: malformed header: {}", what, e.what()));
+  }
+  auto matrix = [&](const char* name) {
+    const auto it = f.arrays.find(name);
+    Require(it != f.arrays.end() && it->second.shape.size() == 2, fmt::format("{}: no 2D array '{}'", what, name));
+    const int64_t rows = it->second.shape[0], cols = it->second.shape[1];
+    const std::vector<float> v = f.Get<float>(name, rows * cols, what);
+    for (float x : v) Require(std::isfinite(x), fmt::format("{}: array '{}' holds a non-finite value", what, name));
+    using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+    return Eigen::MatrixXf(Eigen::Map<const RowMajor>(v.data(), rows, cols));
+  };
+  p.texture = matrix("texture");
+  p.displacement = matrix("displacement");
+  Require(p.texture.rows() == p.displacement.rows() && p.texture.cols() == p.displacement.cols(),
+          fmt::format("{}: texture ({}×{}) and displacement ({}×{}) patches differ in shape", what, p.texture.rows(),
+                      p.texture.cols(), p.displacement.rows(), p.displacement.cols()));
+  return p;
 }
 
 }  // namespace crease

@@ -113,4 +113,41 @@ DetailModel TrainDetailModel(const ScanSet& scans, const FaceRig& rig, const Tra
                              const TrainingOutputs& outputs, TrainingSummary* summary,
                              const std::function<void(const std::string&)>& log = {});
 
+// The training pairs of Sec. 4.2 — texture patches t_i and displacement patches d_i —
+// with the options they were extracted with. Extraction (scans → pairs) is ~99 % of
+// training; the regression (PCA + cascade, Sec. 4.3) is seconds. Keeping the pairs
+// lets sweeps over the PCA dimension or K, F, P, β retrain from them.
+struct TrainingPairs {
+  Eigen::MatrixXf texture;       // N × w², row i = t_i
+  Eigen::MatrixXf displacement;  // N × w², row i = d_i (mm)
+  std::string options_json;      // TrainingOptions of the extraction
+  std::string scan_set;          // the scan set's folder
+  int actors = 0, scans = 0;
+  double seconds = 0.0;          // extraction time
+};
+
+// Sec. 4.1–4.2 only: scans → pairs (fills the summary's actors, accuracy, timing).
+TrainingPairs ExtractTrainingPairs(const ScanSet& scans, const FaceRig& rig, const TrainingOptions& options,
+                                   const TrainingOutputs& outputs, TrainingSummary* summary,
+                                   const std::function<void(const std::string&)>& log = {});
+
+// Sec. 4.3 only: pairs → model. `options` must be the pairs' own in every
+// extraction field (see OptionsForPairs).
+DetailModel TrainDetailModelFromPairs(const TrainingPairs& pairs, const TrainingOptions& options,
+                                      const TrainingOutputs& outputs, TrainingSummary* summary,
+                                      const std::function<void(const std::string&)>& log = {});
+
+// The TrainingOptions fields only the regression reads (PcaOptions, FernOptions).
+std::vector<std::string> RegressionOptionNames();
+
+// The pairs' options with `edit` applied; an edit of an extraction field throws
+// Error naming `what` (the pairs file) and the field.
+TrainingOptions OptionsForPairs(const TrainingPairs& pairs, const std::string& what,
+                                const std::function<void(TrainingOptions*)>& edit);
+
+// CREASPRS v1 (core/array_file.h): header {options, scan_set, actors, scans,
+// seconds}, arrays texture and displacement (f32, N × w², row-major).
+void WriteTrainingPairs(const std::filesystem::path& path, const TrainingPairs& pairs);
+TrainingPairs ReadTrainingPairs(const std::filesystem::path& path);
+
 }  // namespace crease
