@@ -222,6 +222,12 @@ void SetFieldsFromYamlText(const std::string& yaml_text, const std::string& what
   SetFromJson(j, what, options, visit);
 }
 
+std::vector<std::string> FieldNames(void* options, void (*visit)(void*, OptionVisitor&)) {
+  NameCollector c;
+  visit(options, c);
+  return c.names;
+}
+
 std::string YamlTextToJsonText(const std::string& yaml_text, const std::string& what) {
   return LoadYaml<nlohmann::ordered_json>(yaml_text, what).dump();
 }

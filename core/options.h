@@ -38,6 +38,7 @@ void SetFieldsFromJsonText(const std::string& json_text, const std::string& what
 void SetFieldsFromYamlText(const std::string& yaml_text, const std::string& what,
                            void* options, void (*visit)(void*, OptionVisitor&));
 std::string FieldsToJsonText(void* options, void (*visit)(void*, OptionVisitor&), int indent);
+std::vector<std::string> FieldNames(void* options, void (*visit)(void*, OptionVisitor&));
 template <class Options>
 void Visit(void* options, OptionVisitor& v) {
   static_cast<Options*>(options)->VisitFields(v);
@@ -70,6 +71,13 @@ template <class Options>
 std::string OptionsToJson(const Options& options, int indent = 2) {
   Options copy = options;
   return internal::FieldsToJsonText(&copy, &internal::Visit<Options>, indent);
+}
+
+// The field names of an Options struct, in visiting order.
+template <class Options>
+std::vector<std::string> OptionFieldNames() {
+  Options o;
+  return internal::FieldNames(&o, &internal::Visit<Options>);
 }
 
 // A YAML document as JSON text (scalars typed the way a person reads them; quoted

@@ -547,34 +547,15 @@ DetailModel TrainDetailModel(const ScanSet& set, const FaceRig& rig, const Train
 
 namespace {
 
-// Collects the field names an Options struct visits.
-class NameCollector : public OptionVisitor {
- public:
-  std::vector<std::string> names;
-  void Field(const char* n, bool&) override { names.emplace_back(n); }
-  void Field(const char* n, int&) override { names.emplace_back(n); }
-  void Field(const char* n, int64_t&) override { names.emplace_back(n); }
-  void Field(const char* n, uint64_t&) override { names.emplace_back(n); }
-  void Field(const char* n, float&) override { names.emplace_back(n); }
-  void Field(const char* n, double&) override { names.emplace_back(n); }
-  void Field(const char* n, std::string&) override { names.emplace_back(n); }
-  void Field(const char* n, std::vector<int>&) override { names.emplace_back(n); }
-  void Field(const char* n, std::vector<double>&) override { names.emplace_back(n); }
-  void Field(const char* n, std::vector<std::string>&) override { names.emplace_back(n); }
-};
-
 constexpr char kPairsMagic[] = "CREASPRS";
 constexpr uint32_t kPairsVersion = 1;
 
 }  // namespace
 
 std::vector<std::string> RegressionOptionNames() {
-  NameCollector c;
-  PcaOptions pca;
-  FernOptions ferns;
-  pca.VisitFields(c);
-  ferns.VisitFields(c);
-  return c.names;
+  std::vector<std::string> names = OptionFieldNames<PcaOptions>();
+  for (auto& n : OptionFieldNames<FernOptions>()) names.push_back(std::move(n));
+  return names;
 }
 
 TrainingOptions OptionsForPairs(const TrainingPairs& pairs, const std::string& what,
