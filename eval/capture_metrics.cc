@@ -40,6 +40,10 @@ void CaptureEvalOptions::VisitFields(OptionVisitor& v) {
   v.Field("surface_mesh_resolution", surface_mesh_resolution);
   v.Field("max_frames", max_frames);
   v.Field("active_reference_rms_mm", active_reference_rms_mm);
+  v.Field("offset_region", offset_region);
+  v.Field("offset_search_mm", offset_search_mm);
+  v.Field("offset_min_correlation", offset_min_correlation);
+  v.Field("visible_face_fraction", visible_face_fraction);
 }
 
 void CaptureEvalOptions::Check() const {
@@ -48,6 +52,9 @@ void CaptureEvalOptions::Check() const {
   CheckGt(o, "band_mm", band_mm, 0.0);
   CheckGt(o, "surface_max_distance_mm", surface_max_distance_mm, 0.0);
   CheckGe(o, "surface_mesh_resolution", surface_mesh_resolution, 8);
+  CheckGe(o, "offset_search_mm", offset_search_mm, 0.0);
+  CheckGe(o, "visible_face_fraction", visible_face_fraction, 0.0);
+  CheckLe(o, "visible_face_fraction", visible_face_fraction, 1.0);
 }
 
 namespace {
@@ -162,6 +169,46 @@ void Divide(int n, SurfaceError* s) {
 }
 
 // The dataset's per-frame expression displacement file (synth/dataset.h).
+}  // namespace
+
+bool BestVerticalOffset(const cv::Mat& D, const cv::Mat& G, const cv::Mat& mask, int max_shift, int* shift,
+                        double* correlation) {
+  double best = 0.0;
+  bool found = false;
+  for (int s = -max_shift; s <= max_shift; ++s) {
+    double sd = 0, sg = 0, sdd = 0, sgg = 0, sdg = 0;
+    int64_t n = 0;
+    for (int y = std::max(0, -s); y < D.rows && y + s < D.rows; ++y) {
+      const float* d = D.ptr<float>(y + s);
+      const float* g = G.ptr<float>(y);
+      const uint8_t* m = mask.ptr<uint8_t>(y);
+      const uint8_t* md = mask.ptr<uint8_t>(y + s);
+      for (int x = 0; x < D.cols; ++x) {
+        if (!m[x] || !md[x] || !std::isfinite(d[x]) || !std::isfinite(g[x])) continue;
+        sd += d[x];
+        sg += g[x];
+        sdd += double(d[x]) * d[x];
+        sgg += double(g[x]) * g[x];
+        sdg += double(d[x]) * g[x];
+        ++n;
+      }
+    }
+    if (n < 16) continue;
+    const double cov = sdg - sd * sg / n, vd = sdd - sd * sd / n, vg = sgg - sg * sg / n;
+    if (vd <= 0 || vg <= 0) continue;
+    const double r = cov / std::sqrt(vd * vg);
+    if (r > best) {
+      best = r;
+      *shift = -s;  // D(y + s) matches G(y): G's line at y sits at y + s in D, so D's is −s texels higher
+      found = true;
+    }
+  }
+  *correlation = best;
+  return found;
+}
+
+namespace {
+
 fs::path TruthMapPath(const fs::path& dataset, const json& info, int frame) {
   std::string pattern = "maps/{frame:06d}_expression_displacement.exr";
   if (info.contains("files") && info["files"].contains("expression_displacement")) {
@@ -209,7 +256,10 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   const int R = cap.value("map_resolution", 1024);
   const cv::Mat coverage = CoverageMask(RasterizeUv(face_mesh, R, R, "rig face chart"));
   const cv::Mat wrinkle_mask = ValidRegionMask(rig.regions, options.wrinkle_regions, R, coverage);
-  const double band_sigma = options.band_mm / std::max(MmPerTexel(face_mesh, R), 1e-9);
+  const double mm_per_texel = std::max(MmPerTexel(face_mesh, R), 1e-9);
+  const double band_sigma = options.band_mm / mm_per_texel;
+  const cv::Mat offset_mask = ValidRegionMask(rig.regions, {options.offset_region}, R, coverage);
+  const int offset_shift = static_cast<int>(std::lround(options.offset_search_mm / mm_per_texel));
 
   std::optional<ActorModel> actor;
   std::unique_ptr<HifiMeshBuilder> hifi;
@@ -239,6 +289,11 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     const CaptureFrameArrays arrays = ReadCaptureFrameArrays(capture / "frames" / fmt::format("{:06d}.cfr", index));
     e.tracked = arrays.tracked;
     if (!e.tracked) {
+      // Was the face there to be tracked? (the loss metrics)
+      const FrameTruth lost = ReadFrameTruth(dataset, index, truth_rig.num_vertices());
+      int seen = 0;
+      for (int i : face_ids) seen += lost.vertex_visible[i] ? 1 : 0;
+      e.true_visible_fraction = face_ids.empty() ? 0.0 : double(seen) / face_ids.size();
       prev_frame = -2;
       s.per_frame.push_back(e);
       continue;
@@ -269,6 +324,11 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       visible.push_back(i);
     }
     e.visible_vertices = static_cast<int>(visible.size());
+    {
+      int seen = 0;
+      for (int i : face_ids) seen += truth.vertex_visible[i] ? 1 : 0;
+      e.true_visible_fraction = face_ids.empty() ? 0.0 : double(seen) / face_ids.size();
+    }
     if (!visible.empty()) {
       e.coarse_px = sc / visible.size();
       e.refined_px = sr / visible.size();
@@ -309,6 +369,15 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       e.d_face_band = CompareMaps(Db, Gb, coverage);
       e.d_wrinkle_band = CompareMaps(Db, Gb, wrinkle_mask);
       band_err = Db - Gb;
+      if (cv::countNonZero(offset_mask) > 0 &&
+          CompareMaps(Db, Gb, offset_mask).reference_rms_mm >= options.active_reference_rms_mm) {
+        int shift = 0;
+        if (BestVerticalOffset(Db, Gb, offset_mask, offset_shift, &shift, &e.d_offset_correlation) &&
+            e.d_offset_correlation >= options.offset_min_correlation) {
+          e.has_offset = true;
+          e.d_offset_mm = shift * mm_per_texel;  // +: D^t's lines lie higher (v grows downwards)
+        }
+      }
       if (e.d_wrinkle_band.reference_rms_mm >= options.active_reference_rms_mm) {
         ++s.active_frames;
         pooled_face.Add(D, G, coverage);
@@ -351,6 +420,32 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     prev_band_err = band_err;
     prev_frame = index;
     s.per_frame.push_back(e);
+  }
+
+  // Loss and recovery; wrinkle offset and slide.
+  int run = 0;
+  std::vector<double> offsets;
+  for (const FrameCaptureEval& e : s.per_frame) {
+    if (!e.tracked && e.true_visible_fraction >= options.visible_face_fraction) {
+      ++s.lost_visible_frames;
+      s.longest_loss_frames = std::max(s.longest_loss_frames, ++run);
+    } else {
+      run = 0;
+    }
+    if (e.has_offset) offsets.push_back(e.d_offset_mm);
+  }
+  s.offset_frames = static_cast<int>(offsets.size());
+  if (!offsets.empty()) {
+    double sum = 0;
+    for (double o : offsets) sum += o;
+    s.d_offset_mm = sum / offsets.size();
+    const size_t q = std::max<size_t>(1, offsets.size() / 4);
+    double first = 0, last = 0;
+    for (size_t i = 0; i < q; ++i) {
+      first += offsets[i];
+      last += offsets[offsets.size() - 1 - i];
+    }
+    s.d_offset_slide_mm = (last - first) / q;
   }
 
   // Means.
@@ -430,7 +525,11 @@ std::string CaptureEvalSummary::ToJson() const {
                        {"face", ComparisonJson(d_face)},
                        {"wrinkle_regions", ComparisonJson(d_wrinkle)},
                        {"wrinkle_regions_band", ComparisonJson(d_wrinkle_band)},
-                       {"jitter_band_mm", d_jitter_mm}};
+                       {"jitter_band_mm", d_jitter_mm},
+                       {"offset_frames", offset_frames},
+                       {"offset_mm", d_offset_mm},
+                       {"offset_slide_mm", d_offset_slide_mm}};
+  j["loss"] = {{"lost_visible_frames", lost_visible_frames}, {"longest_loss_frames", longest_loss_frames}};
   j["surface"] = {{"frames", surface_frames},
                   {"coarse", SurfaceJson(surface_coarse)},
                   {"coarse_mesoscopic", SurfaceJson(surface_meso)},
@@ -441,7 +540,7 @@ std::string CaptureEvalSummary::ToJson() const {
                 {"timing", json::parse(timing_json)}};
   json pf = json::array();
   for (const FrameCaptureEval& e : per_frame) {
-    json f = {{"frame", e.frame}, {"tracked", e.tracked}};
+    json f = {{"frame", e.frame}, {"tracked", e.tracked}, {"true_visible_fraction", e.true_visible_fraction}};
     if (e.tracked) {
       f["visible_vertices"] = e.visible_vertices;
       f["coarse_px"] = e.coarse_px;
@@ -458,6 +557,10 @@ std::string CaptureEvalSummary::ToJson() const {
                              {"face_band", ComparisonJson(e.d_face_band)},
                              {"wrinkle_regions_band", ComparisonJson(e.d_wrinkle_band)},
                              {"jitter_band_mm", e.d_jitter_mm}};
+        if (e.has_offset) {
+          f["displacement"]["offset_mm"] = e.d_offset_mm;
+          f["displacement"]["offset_correlation"] = e.d_offset_correlation;
+        }
       }
       if (e.has_surface) {
         f["surface"] = {{"coarse", SurfaceJson(e.surface_coarse)},
@@ -520,8 +623,19 @@ std::string CaptureEvalSummary::ToMarkdown() const {
       o << fmt::format("| {} | {:.4f} | {:.3f} | {:.2f} | {:.4f} |\n", name, c.rmse_mm, c.correlation, Amp(c),
                        c.reference_rms_mm);
     }
-    o << fmt::format("\nD^t jitter (frame-to-frame change of the band error, wrinkle regions): {:.4f} mm\n\n",
+    o << fmt::format("\nD^t jitter (frame-to-frame change of the band error, wrinkle regions): {:.4f} mm\n",
                      d_jitter_mm);
+    if (offset_frames > 0) {
+      o << fmt::format("Wrinkle offset (the shift of D^t's lines against the true ones that correlates best; + = "
+                       "higher on the face), {} frames: mean {:+.2f} mm, last quarter minus first quarter {:+.2f} mm "
+                       "(Fig. 14)\n",
+                       offset_frames, d_offset_mm, d_offset_slide_mm);
+    }
+    o << "\n";
+  }
+  if (lost_visible_frames > 0) {
+    o << fmt::format("Face visible but not tracked: {} frames; the longest run (recovery time) {} frames\n\n",
+                     lost_visible_frames, longest_loss_frames);
   }
   if (surface_frames > 0) {
     o << fmt::format("## Surface H^t against the true high-resolution surface, {} frames (rigidly aligned)\n\n",

@@ -57,6 +57,15 @@ struct CaptureEvalOptions {
   // A frame counts as active for the pooled displacement metrics when the true
   // wrinkle-band RMS over the wrinkle regions reaches this, mm.
   double active_reference_rms_mm = 0.005;
+  // Wrinkle offset (the slide of Fig. 14): the vertical shift of D^t's wrinkle band
+  // against the truth's in this region that maximises their correlation, searched
+  // within ±offset_search_mm.
+  std::string offset_region = "forehead";
+  double offset_search_mm = 4.0;
+  double offset_min_correlation = 0.2;  // below: the lines do not match at any shift; not measured
+  // A frame counts as "face visible" for the loss metrics when at least this
+  // fraction of the face-chart vertices is visible in the ground truth.
+  double visible_face_fraction = 0.5;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
@@ -80,6 +89,11 @@ struct FrameCaptureEval {
   bool has_displacement = false;
   MapComparison d_face, d_wrinkle, d_face_band, d_wrinkle_band;
   double d_jitter_mm = 0;  // band, wrinkle regions
+  // Wrinkle offset in offset_region, mm (+: D^t's wrinkles lie above the true ones,
+  // towards the top of the face); measured on active frames only (has_offset).
+  bool has_offset = false;
+  double d_offset_mm = 0, d_offset_correlation = 0;
+  double true_visible_fraction = 0;  // of the face-chart vertices, ground truth
   bool has_surface = false;
   SurfaceError surface_coarse, surface_meso, surface_full;
 };
@@ -95,6 +109,15 @@ struct CaptureEvalSummary {
   int active_frames = 0;
   MapComparison d_face, d_wrinkle, d_wrinkle_band;
   double d_jitter_mm = 0;  // mean over consecutive frame pairs
+  // Wrinkle offset: mean over the measured frames, and the slide — the mean of the
+  // last quarter of the measured frames minus that of the first quarter (for the
+  // moving-light preset: light from above minus light from the front, Fig. 14).
+  int offset_frames = 0;
+  double d_offset_mm = 0, d_offset_slide_mm = 0;
+  // Loss and recovery: frames with the face visible (true_visible_fraction ≥
+  // visible_face_fraction) but not tracked, in all and the longest run of them
+  // (the recovery time after an occlusion, in frames).
+  int lost_visible_frames = 0, longest_loss_frames = 0;
   SurfaceError surface_coarse, surface_meso, surface_full;    // means over surface frames
   std::string timing_json = "{}";  // copied from the capture's summary
   double fps = 0, tracking_share = 0, detail_share = 0;
@@ -104,6 +127,13 @@ struct CaptureEvalSummary {
   std::string ToJson() const;
   std::string ToCsv() const;  // one row per frame
 };
+
+// The vertical offset of D's features against G's, texels (+: D's lie higher, at
+// smaller v): the s maximising the correlation of D(x, y − s) with G(x, y) over
+// `mask` (CV_8U), |s| ≤ max_shift. D, G: CV_32F maps of one size. False when no shift correlates
+// positively. The wrinkle offset of Fig. 14.
+bool BestVerticalOffset(const cv::Mat& D, const cv::Mat& G, const cv::Mat& mask, int max_shift, int* shift,
+                        double* correlation);
 
 // Evaluates the capture folder `capture` (written by `crease capture`) against the
 // sequence dataset `dataset` (written by `crease synth sequence` with its maps).
