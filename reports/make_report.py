@@ -614,7 +614,9 @@ def figure_bar(exp, spec):
         ax.bar(pos, means, width * 0.9, yerr=stds, capsize=3,
                label=point_label(p) if len(points) > 1 else None)
     ax.set_xticks(np.arange(len(ys)))
-    ax.set_xticklabels(ys, rotation=15 if len(ys) > 3 else 0)
+    # Optional short tick labels ("labels": one per y); default: the metric keys.
+    labels = spec.get("labels") if isinstance(spec.get("labels"), list) and len(spec["labels"]) == len(ys) else ys
+    ax.set_xticklabels(labels, rotation=15 if len(ys) > 3 else 0)
     ax.set_ylabel(spec.get("y_label", ""))
     ax.set_title(spec.get("title", spec.get("name", "")))
     ax.grid(alpha=0.3, axis="y")

@@ -387,7 +387,11 @@ cv::Mat DetailRegressor::Regress(const cv::Mat& gray, const cv::Mat& seen, Detai
   // 2. Eq. 6: c_i = c̄ + Σ_k R^k(t_i).
   t0 = Clock::now();
   RowMatrixXf c(N, Dim);
-  m.model.cascade.PredictBatch(patches.data(), N, c.data());
+  if (m.model.baseline.empty()) {
+    m.model.cascade.PredictBatch(patches.data(), N, c.data());
+  } else {  // the detail-accuracy experiment's baselines (pipeline/training/patch_baselines.h)
+    m.model.baseline.PredictBatch(patches.data(), N, c.data());
+  }
   t.regress_ms = MsSince(t0);
 
   // 3. d_i = mean + basis · c_i (dropped patches: 0), in fixed column blocks.

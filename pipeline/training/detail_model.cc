@@ -28,6 +28,12 @@ void DetailModel::Validate(const std::string& what) const {
           fmt::format("{}: the fern cascade predicts {} coefficients but the PCA has {} dimensions", what,
                       cascade.dimensions, pca.dimensions()));
   cascade.Check(what);
+  if (!baseline.empty()) {
+    baseline.Check(what);
+    Require(baseline.patch_pixels == w * w && baseline.dimensions == pca.dimensions(),
+            fmt::format("{}: the {} baseline maps {} pixels to {} coefficients, the model {} to {}", what,
+                        baseline.kind, baseline.patch_pixels, baseline.dimensions, w * w, pca.dimensions()));
+  }
 }
 
 void WriteDetailModel(const std::filesystem::path& path, const DetailModel& model) {
@@ -43,6 +49,7 @@ void WriteDetailModel(const std::filesystem::path& path, const DetailModel& mode
   header["patch_pixels"] = model.cascade.patch_pixels;
   header["dimensions"] = model.cascade.dimensions;
   header["training"] = json::parse(model.training_json);
+  if (!model.baseline.empty()) header["baseline"] = model.baseline.kind;
   ArrayFileWriter w(header.dump());
   const int64_t n = model.pca.patch_pixels(), D = model.pca.dimensions();
   w.Add("pca_mean", model.pca.mean.data(), {n});
@@ -55,6 +62,16 @@ void WriteDetailModel(const std::filesystem::path& path, const DetailModel& mode
   w.Add("fern_pixel_b", model.cascade.pixel_b.data(), {K, F});
   w.Add("fern_thresholds", model.cascade.thresholds.data(), {K, F});
   w.Add("fern_outputs", model.cascade.outputs.data(), {K, int64_t{1} << F, D});
+  // Optional baseline arrays, row-major.
+  using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  if (model.baseline.kind == "ridge") {
+    const RowMajor W = model.baseline.weights;
+    w.Add("baseline_weights", W.data(), {W.rows(), W.cols()});
+  } else if (model.baseline.kind == "nearest") {
+    const RowMajor E = model.baseline.examples, C = model.baseline.coefficients;
+    w.Add("baseline_examples", E.data(), {E.rows(), E.cols()});
+    w.Add("baseline_coefficients", C.data(), {C.rows(), C.cols()});
+  }
   w.Write(path, kMagic, DetailModel::kFormatVersion);
 }
 
@@ -74,6 +91,7 @@ DetailModel ReadDetailModel(const std::filesystem::path& path) {
     m.cascade.patch_pixels = header.at("patch_pixels").get<int>();
     m.cascade.dimensions = header.at("dimensions").get<int>();
     m.training_json = header.at("training").dump();
+    m.baseline.kind = header.value("baseline", "");
   } catch (const json::exception& e) {
     throw Error(fmt::format("{}: malformed detail model header: {}", what, e.what()));
   }
@@ -92,6 +110,25 @@ DetailModel ReadDetailModel(const std::filesystem::path& path) {
   m.cascade.pixel_b = file.Get<uint16_t>("fern_pixel_b", K * F, what);
   m.cascade.thresholds = file.Get<float>("fern_thresholds", K * F, what);
   m.cascade.outputs = file.Get<float>("fern_outputs", K * (int64_t{1} << F) * D, what);
+  if (!m.baseline.empty()) {
+    using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+    auto matrix = [&](const char* name) -> Eigen::MatrixXf {
+      const auto it = file.arrays.find(name);
+      Require(it != file.arrays.end() && it->second.shape.size() == 2,
+              fmt::format("{}: the {} baseline lacks its 2D array '{}'", what, m.baseline.kind, name));
+      const int64_t rows = it->second.shape[0], cols = it->second.shape[1];
+      const auto v = file.Get<float>(name, rows * cols, what);
+      return Eigen::Map<const RowMajor>(v.data(), rows, cols);
+    };
+    m.baseline.patch_pixels = n;
+    m.baseline.dimensions = D;
+    if (m.baseline.kind == "ridge") {
+      m.baseline.weights = matrix("baseline_weights");
+    } else if (m.baseline.kind == "nearest") {
+      m.baseline.examples = matrix("baseline_examples");
+      m.baseline.coefficients = matrix("baseline_coefficients");
+    }
+  }
   m.Validate(what);
   return m;
 }
@@ -119,6 +156,10 @@ std::string DescribeDetailModel(const DetailModel& m) {
                                                t.value("actors", 0), t.value("scans", 0), t.value("training_pairs", 0));
     if (t.contains("scan_set")) s += fmt::format("  scan set          {}\n", t.value("scan_set", ""));
   } catch (const json::exception&) {
+  }
+  if (!m.baseline.empty()) {
+    s += fmt::format("  regressor         the '{}' baseline (not the cascade; pipeline/training/patch_baselines.h)\n",
+                     m.baseline.kind);
   }
   return s;
 }

@@ -15,6 +15,7 @@
 
 #include "pipeline/training/detail_extraction.h"
 #include "pipeline/training/fern_cascade.h"
+#include "pipeline/training/patch_baselines.h"
 #include "pipeline/training/patches.h"
 #include "pipeline/training/pca.h"
 #include "pipeline/training/wrinkle_map.h"
@@ -30,6 +31,9 @@ struct DetailModel {
   DetailExtractionOptions detail;  // G, G^HF (the rig is made compatible with G), Sec. 4.1
   PatchPca pca;                    // Sec. 4.3
   FernCascade cascade;             // Sec. 4.3, Eq. 6
+  // A baseline regressor used instead of the cascade when not empty (the
+  // detail-accuracy experiment; not in the paper).
+  PatchBaseline baseline;
   std::string training_json = "{}";  // provenance: scan set, options, summary figures
 
   // Throws Error (starting with `what`) when the parts disagree: patch size vs PCA

@@ -33,6 +33,7 @@ void TrainingOptions::VisitFields(OptionVisitor& v) {
   patch.VisitFields(v);
   pca.VisitFields(v);
   ferns.VisitFields(v);
+  baseline.VisitFields(v);
   v.Field("training_lights", training_lights);
   v.Field("max_actors", max_actors);
   v.Field("validation_band_mm", validation_band_mm);
@@ -46,6 +47,7 @@ void TrainingOptions::Check() const {
   patch.Check();
   pca.Check();
   ferns.Check();
+  baseline.Check();
   Require(!training_lights.empty(), "TrainingOptions.training_lights must be \"all\", \"first\" or light names");
   CheckGe("TrainingOptions", "max_actors", max_actors, 0);
   CheckGe("TrainingOptions", "validation_band_mm", validation_band_mm, 0.0);
@@ -520,6 +522,13 @@ DetailModel TrainDetailModelFromPairs(const TrainingPairs& pairs, const Training
   log(fmt::format("fern cascade: K = {}, training RMSE of coefficients {:.4f} → {:.4f}", options.ferns.num_ferns,
                   trained.report.train_rmse.front(), trained.report.train_rmse.back()));
   model.cascade = std::move(trained.cascade);
+  if (options.baseline.regressor != "ferns") {
+    t0 = Clock::now();
+    model.baseline = FitPatchBaseline(T, targets, options.baseline);
+    sum.timing.Add("baseline regressor", Since(t0));
+    log(fmt::format("baseline regressor '{}' fitted; capture applies it instead of the cascade",
+                    options.baseline.regressor));
+  }
   model.map_resolution = R;
   model.wrinkle = options.wrinkle;
   model.patch = options.patch;
@@ -555,6 +564,7 @@ constexpr uint32_t kPairsVersion = 1;
 std::vector<std::string> RegressionOptionNames() {
   std::vector<std::string> names = OptionFieldNames<PcaOptions>();
   for (auto& n : OptionFieldNames<FernOptions>()) names.push_back(std::move(n));
+  for (auto& n : OptionFieldNames<PatchBaselineOptions>()) names.push_back(std::move(n));
   return names;
 }
 

@@ -46,6 +46,7 @@ struct TrainingOptions {
   PatchLayoutOptions patch;        // Sec. 4.2
   PcaOptions pca;                  // Sec. 4.3
   FernOptions ferns;               // Sec. 4.3
+  PatchBaselineOptions baseline;   // the regressor applied: ferns (Sec. 4.3) or a baseline
   // Which light rigs' images make training textures: "all" (each light its own
   // texture: relighting augmentation), "first", or a comma-separated list of names.
   std::string training_lights = "all";
@@ -137,7 +138,8 @@ DetailModel TrainDetailModelFromPairs(const TrainingPairs& pairs, const Training
                                       const TrainingOutputs& outputs, TrainingSummary* summary,
                                       const std::function<void(const std::string&)>& log = {});
 
-// The TrainingOptions fields only the regression reads (PcaOptions, FernOptions).
+// The TrainingOptions fields only the regression reads (PcaOptions, FernOptions,
+// PatchBaselineOptions).
 std::vector<std::string> RegressionOptionNames();
 
 // The pairs' options with `edit` applied; an edit of an extraction field throws
