@@ -171,7 +171,10 @@ std::string ShellQuote(const std::string& s) {
 
 std::string CommandLine(const std::vector<std::string>& argv) {
   std::string out = "crease";
-  for (const auto& a : argv) out += " " + ShellQuote(a);
+  for (const auto& a : argv) {
+    out += ' ';
+    out += ShellQuote(a);
+  }
   return out;
 }
 
@@ -700,60 +703,94 @@ json CollectRunMetrics(const std::vector<ExperimentStage>& stages) {
   return json{{"metrics", metrics}, {"curves", curves}};
 }
 
-ExperimentSummary RunExperiment(const ExperimentConfig& config_in, const ExperimentRunnerOptions& options,
-                                const StageExecutor& executor) {
-  const auto t_start = std::chrono::steady_clock::now();
-  auto log = [&](const std::string& s) {
-    if (options.log) options.log(s);
-  };
-  ExperimentConfig config = ApplyProfile(config_in, options.profile);
-  if (options.seeds > 0) config.seeds = options.seeds;
-  Require(options.jobs >= 1, "--jobs must be ≥ 1");
-  const std::vector<ExperimentRun> all_runs = ExpandRuns(config);
-  const std::vector<ExperimentRun> runs = ShardRuns(all_runs, options.shard, options.num_shards);
+namespace {
 
-  // Plan: the stages of every run, deduplicated by key (a sweep over capture options
-  // shares rig, scans, model, tracker and sequences).
+// One experiment of a RunExperiments call: its runs and their stages.
+struct PlannedExperiment {
+  ExperimentConfig config;
+  const ExperimentRunnerOptions* options = nullptr;
+  size_t total_runs = 0;  // before sharding
+  std::vector<ExperimentRun> runs;
   std::vector<std::vector<ExperimentStage>> run_stages;
+  ExperimentSummary summary;
+};
+
+void CollectExperiment(PlannedExperiment& p, const std::map<std::string, size_t>& index,
+                       const std::vector<int>& done, const std::vector<std::string>& failure);
+
+}  // namespace
+
+std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& jobs, const StageExecutor& executor) {
+  const auto t_start = std::chrono::steady_clock::now();
+  Require(!jobs.empty(), "no experiments to run");
+  const ExperimentRunnerOptions& first = jobs.front().options;
+  auto log = [&](const std::string& s) {
+    if (first.log) first.log(s);
+  };
+  Require(first.jobs >= 1, "--jobs must be ≥ 1");
+  for (const auto& j : jobs)
+    Require(j.options.cache == first.cache && j.options.jobs == first.jobs,
+            "experiments run together must share their cache and --jobs");
+
+  // Plan: the stages of every run of every experiment, deduplicated by key (a sweep
+  // over capture options shares rig, scans, pairs, model, tracker and sequences;
+  // experiments share their base stages).
+  std::vector<PlannedExperiment> planned;
   std::vector<ExperimentStage> unique;
   std::map<std::string, size_t> index;
-  for (const auto& r : runs) {
-    run_stages.push_back(PlanRunStages(r, options.cache, options.program_version));
-    for (const auto& s : run_stages.back()) {
-      if (index.count(s.key)) continue;
-      index[s.key] = unique.size();
-      unique.push_back(s);
+  for (const auto& job : jobs) {
+    PlannedExperiment p;
+    p.options = &job.options;
+    p.config = ApplyProfile(job.config, job.options.profile);
+    if (job.options.seeds > 0) p.config.seeds = job.options.seeds;
+    const std::vector<ExperimentRun> all_runs = ExpandRuns(p.config);
+    p.total_runs = all_runs.size();
+    p.runs = ShardRuns(all_runs, job.options.shard, job.options.num_shards);
+    std::set<std::string> own;
+    for (const auto& r : p.runs) {
+      p.run_stages.push_back(PlanRunStages(r, first.cache, job.options.program_version));
+      for (const auto& s : p.run_stages.back()) {
+        own.insert(s.key);
+        if (index.count(s.key)) continue;
+        index[s.key] = unique.size();
+        unique.push_back(s);
+      }
     }
+    p.summary.runs = static_cast<int>(p.runs.size());
+    p.summary.stages = static_cast<int>(own.size());
+    planned.push_back(std::move(p));
   }
 
-  enum class State { kPending, kRunning, kDone, kFailed };
-  std::vector<State> state(unique.size(), State::kPending);
+  enum State { kPending, kRunning, kDone, kFailed };
+  std::vector<int> state(unique.size(), kPending);
   std::vector<std::string> failure(unique.size());
-  ExperimentSummary summary;
-  summary.runs = static_cast<int>(runs.size());
-  summary.stages = static_cast<int>(unique.size());
   for (size_t i = 0; i < unique.size(); ++i) {
     const fs::path done = unique[i].dir / "stage.json";
     if (fs::exists(done)) {
       try {
-        if (ReadJsonFile(done).at("key_inputs") == unique[i].key_inputs) {
-          state[i] = State::kDone;
-          ++summary.stages_cached;
-        }
+        if (ReadJsonFile(done).at("key_inputs") == unique[i].key_inputs) state[i] = kDone;
       } catch (const std::exception&) {
         // unreadable: rebuilt below
       }
     }
   }
-  log(fmt::format("{}: {} runs{}, {} stages ({} cached)", config.name, runs.size(),
-                  options.num_shards > 1 ? fmt::format(" (shard {}/{} of {})", options.shard + 1, options.num_shards,
-                                                       all_runs.size())
-                                         : "",
-                  unique.size(), summary.stages_cached));
+  std::set<std::string> cached_keys;
+  for (size_t i = 0; i < unique.size(); ++i)
+    if (state[i] == kDone) cached_keys.insert(unique[i].key);
+  for (auto& p : planned) {
+    std::set<std::string> own;
+    for (const auto& stages : p.run_stages)
+      for (const auto& s : stages) own.insert(s.key);
+    for (const auto& k : own) p.summary.stages_cached += cached_keys.count(k) ? 1 : 0;
+    log(fmt::format("{}: {} runs{}, {} stages ({} cached)", p.config.name, p.runs.size(),
+                    p.options->num_shards > 1 ? fmt::format(" (shard {}/{} of {})", p.options->shard + 1,
+                                                            p.options->num_shards, p.total_runs)
+                                              : "",
+                    p.summary.stages, p.summary.stages_cached));
+  }
 
   std::mutex mutex;
   std::condition_variable cv;
-  int running = 0;
   auto worker = [&] {
     std::unique_lock<std::mutex> lock(mutex);
     for (;;) {
@@ -761,17 +798,16 @@ ExperimentSummary RunExperiment(const ExperimentConfig& config_in, const Experim
       size_t pick = unique.size();
       bool any_pending = false;
       for (size_t i = 0; i < unique.size(); ++i) {
-        if (state[i] != State::kPending) continue;
+        if (state[i] != kPending) continue;
         bool ready = true, failed = false;
         for (const auto& dep : unique[i].depends) {
-          const State ds = state[index.at(dep)];
-          failed = failed || ds == State::kFailed;
-          ready = ready && ds == State::kDone;
+          const int ds = state[index.at(dep)];
+          failed = failed || ds == kFailed;
+          ready = ready && ds == kDone;
         }
         if (failed) {
-          state[i] = State::kFailed;
+          state[i] = kFailed;
           failure[i] = "an input stage failed";
-          ++summary.stages_failed;
           cv.notify_all();
           continue;
         }
@@ -782,16 +818,14 @@ ExperimentSummary RunExperiment(const ExperimentConfig& config_in, const Experim
         }
       }
       if (pick == unique.size()) {
-        if (!any_pending && running == 0) {
+        if (!any_pending) {
           cv.notify_all();
           return;
         }
-        if (!any_pending) return;
         cv.wait(lock);
         continue;
       }
-      state[pick] = State::kRunning;
-      ++running;
+      state[pick] = kRunning;
       const ExperimentStage& s = unique[pick];
       log(fmt::format("  {} {} …  {}", s.kind, s.key, CommandLine(s.argv)));
       lock.unlock();
@@ -817,14 +851,11 @@ ExperimentSummary RunExperiment(const ExperimentConfig& config_in, const Experim
         error = fmt::format("{} stage: {}", s.kind, e.what());
       }
       lock.lock();
-      --running;
       if (error.empty()) {
-        state[pick] = State::kDone;
-        ++summary.stages_run;
+        state[pick] = kDone;
       } else {
-        state[pick] = State::kFailed;
+        state[pick] = kFailed;
         failure[pick] = error;
-        ++summary.stages_failed;
         log("  FAILED: " + error);
       }
       cv.notify_all();
@@ -832,10 +863,42 @@ ExperimentSummary RunExperiment(const ExperimentConfig& config_in, const Experim
   };
   {
     std::vector<std::thread> threads;
-    for (int j = 0; j < options.jobs; ++j) threads.emplace_back(worker);
+    for (int j = 0; j < first.jobs; ++j) threads.emplace_back(worker);
     for (auto& t : threads) t.join();
   }
 
+  std::vector<ExperimentSummary> summaries;
+  for (auto& p : planned) {
+    std::set<std::string> own;
+    for (const auto& stages : p.run_stages)
+      for (const auto& s : stages) own.insert(s.key);
+    for (const auto& k : own) {
+      const size_t i = index.at(k);
+      if (state[i] == kFailed) ++p.summary.stages_failed;
+      if (state[i] == kDone && !cached_keys.count(k)) ++p.summary.stages_run;
+    }
+    CollectExperiment(p, index, state, failure);
+    p.summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+    summaries.push_back(p.summary);
+  }
+  return summaries;
+}
+
+ExperimentSummary RunExperiment(const ExperimentConfig& config, const ExperimentRunnerOptions& options,
+                                const StageExecutor& executor) {
+  return RunExperiments({ExperimentJob{config, options}}, executor).front();
+}
+
+namespace {
+
+void CollectExperiment(PlannedExperiment& p, const std::map<std::string, size_t>& index,
+                       const std::vector<int>& state, const std::vector<std::string>& failure) {
+  constexpr int kDone = 2;
+  const ExperimentConfig& config = p.config;
+  const ExperimentRunnerOptions& options = *p.options;
+  const std::vector<ExperimentRun>& runs = p.runs;
+  const std::vector<std::vector<ExperimentStage>>& run_stages = p.run_stages;
+  ExperimentSummary& summary = p.summary;
   // Collect: a JSON per run, then the experiment's CSV and description.
   fs::create_directories(options.out / "runs");
   std::vector<json> run_jsons;
@@ -853,9 +916,9 @@ ExperimentSummary RunExperiment(const ExperimentConfig& config_in, const Experim
       commands.push_back(CommandLine(s.argv));
       keys[s.kind] = keys.contains(s.kind) ? json(keys[s.kind].get<std::string>() + "," + s.key) : json(s.key);
       const size_t i = index.at(s.key);
-      if (state[i] != State::kDone && error.empty())
+      if (state[i] != kDone && error.empty())
         error = failure[i].empty() ? fmt::format("{} stage did not run", s.kind) : failure[i];
-      if (state[i] == State::kDone) {
+      if (state[i] == kDone) {
         try {
           seconds += ReadJsonFile(s.dir / "stage.json").value("seconds", 0.0);
         } catch (const std::exception&) {
@@ -936,8 +999,10 @@ ExperimentSummary RunExperiment(const ExperimentConfig& config_in, const Experim
   e["runs_failed"] = runs_failed;
   e["complete"] = runs_failed.empty();
   WriteJsonFile(options.out / "experiment.json", e);
-  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
-  return summary;
 }
+
+}  // namespace
+
+
 
 }  // namespace crease

@@ -158,6 +158,16 @@ struct ExperimentSummary {
 ExperimentSummary RunExperiment(const ExperimentConfig& config, const ExperimentRunnerOptions& options,
                                 const StageExecutor& executor);
 
+// Several experiments with one scheduler (`crease experiment run all`): their stages
+// are deduplicated across experiments and run J at a time with no barrier between
+// experiments. All jobs must share options.cache and options.jobs; the log of the
+// first is used. One summary per job, in order.
+struct ExperimentJob {
+  ExperimentConfig config;
+  ExperimentRunnerOptions options;
+};
+std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& jobs, const StageExecutor& executor);
+
 // Metrics of a finished run from its stage folders: model report (PCA energy,
 // training time) and the mean over its eval.json files (tracking, displacement,
 // surface, speed), flattened to dotted keys; curves: pca_energy and the first

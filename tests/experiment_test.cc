@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <algorithm>
+#include <mutex>
 #include <set>
 
 #include "core/error.h"
@@ -278,6 +279,40 @@ TEST(Experiment, ARunResumedAfterAFailureEqualsAnUninterruptedOne) {
   std::string header;
   std::getline(csv, header);
   EXPECT_EQ(header.rfind("run_id,seed,status,training.num_ferns,capture.wrinkle_frames,", 0), 0u) << header;
+  fs::remove_all(root);
+}
+
+TEST(Experiment, ExperimentsRunTogetherShareTheirStages) {
+  const ExperimentConfig a = ParseExperimentConfig(kConfig, "toy.yaml");
+  ExperimentConfig b = ParseExperimentConfig(
+      "name: other\nseeds: 2\ndataset: {training_actors: 2, test_actors: 2, frames: 12}\ntraining: {num_ferns: 1280}\n",
+      "other.yaml");
+  const fs::path root = TempDir("together");
+  ExperimentRunnerOptions o;
+  o.program_version = "test";
+  o.cache = root / "cache";
+  o.jobs = 2;
+  std::vector<ExperimentJob> jobs = {{a, o}, {b, o}};
+  jobs[0].options.out = root / "toy";
+  jobs[1].options.out = root / "other";
+  std::map<std::string, int> runs_of_stage;
+  std::mutex m;
+  const auto summaries = RunExperiments(jobs, [&](const auto& argv, const auto& log) {
+    {
+      std::lock_guard<std::mutex> lock(m);
+      std::string all;
+      for (const auto& x : argv) all += x + " ";
+      ++runs_of_stage[all];
+    }
+    return FakeExecute(argv, log);
+  });
+  ASSERT_EQ(summaries.size(), 2u);
+  EXPECT_EQ(summaries[0].runs_ok, 8);
+  EXPECT_EQ(summaries[1].runs_ok, 2);
+  // Every command ran once, although "other" is toy's base configuration (its stages
+  // are all shared with toy's wrinkle_frames runs, up to the capture).
+  for (const auto& [cmd, n] : runs_of_stage) EXPECT_EQ(n, 1) << cmd;
+  EXPECT_TRUE(fs::exists(root / "other" / "runs" / "base_seed1.json"));
   fs::remove_all(root);
 }
 

@@ -159,7 +159,8 @@ void AddExperimentCommands(CLI::App& app) {
         }
         return;
       }
-      int failed = 0;
+      // All experiments under one scheduler: no barrier between them, shared stages once.
+      std::vector<ExperimentJob> batch;
       for (const auto& c : parsed) {
         ExperimentRunnerOptions oc = o;
         oc.out = root / c.name;
@@ -168,12 +169,18 @@ void AddExperimentCommands(CLI::App& app) {
                                  seeds > 0 ? fmt::format(" --seeds {}", seeds) : "",
                                  jobs > 1 ? fmt::format(" --jobs {}", jobs) : "",
                                  shard.empty() ? "" : " --shard " + shard);
-        const ExperimentSummary s = RunExperiment(c, oc, SubprocessExecutor(SelfPath()));
-        std::printf("%s: %d/%d runs ok, %d stages (%d cached, %d run, %d failed) in %.1f s → %s\n", c.name.c_str(),
-                    s.runs_ok, s.runs, s.stages, s.stages_cached, s.stages_run, s.stages_failed, s.seconds,
-                    oc.out.string().c_str());
+        batch.push_back({c, oc});
+      }
+      const std::vector<ExperimentSummary> summaries = RunExperiments(batch, SubprocessExecutor(SelfPath()));
+      int failed = 0;
+      for (size_t i = 0; i < batch.size(); ++i) {
+        const ExperimentSummary& s = summaries[i];
+        std::printf("%s: %d/%d runs ok, %d stages (%d cached, %d run, %d failed) → %s\n",
+                    batch[i].config.name.c_str(), s.runs_ok, s.runs, s.stages, s.stages_cached, s.stages_run,
+                    s.stages_failed, batch[i].options.out.string().c_str());
         failed += s.runs_failed;
       }
+      if (!summaries.empty()) std::printf("all done in %.1f s\n", summaries.back().seconds);
       if (failed > 0) throw Error(fmt::format("{} runs failed (see runs/*.json and the stage logs)", failed));
     });
   }
