@@ -426,6 +426,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   int run = 0;
   std::vector<double> offsets;
   for (const FrameCaptureEval& e : s.per_frame) {
+    s.min_visible_fraction = std::min(s.min_visible_fraction, e.true_visible_fraction);
     if (!e.tracked && e.true_visible_fraction >= options.visible_face_fraction) {
       ++s.lost_visible_frames;
       s.longest_loss_frames = std::max(s.longest_loss_frames, ++run);
@@ -526,10 +527,17 @@ std::string CaptureEvalSummary::ToJson() const {
                        {"wrinkle_regions", ComparisonJson(d_wrinkle)},
                        {"wrinkle_regions_band", ComparisonJson(d_wrinkle_band)},
                        {"jitter_band_mm", d_jitter_mm},
-                       {"offset_frames", offset_frames},
-                       {"offset_mm", d_offset_mm},
-                       {"offset_slide_mm", d_offset_slide_mm}};
-  j["loss"] = {{"lost_visible_frames", lost_visible_frames}, {"longest_loss_frames", longest_loss_frames}};
+                       {"offset_frames", offset_frames}};
+  if (offset_frames > 0) {  // else not measured (null), never a misleading 0
+    j["displacement"]["offset_mm"] = d_offset_mm;
+    j["displacement"]["offset_slide_mm"] = d_offset_slide_mm;
+  } else {
+    j["displacement"]["offset_mm"] = nullptr;
+    j["displacement"]["offset_slide_mm"] = nullptr;
+  }
+  j["loss"] = {{"lost_visible_frames", lost_visible_frames},
+               {"longest_loss_frames", longest_loss_frames},
+               {"min_visible_fraction", min_visible_fraction}};
   j["surface"] = {{"frames", surface_frames},
                   {"coarse", SurfaceJson(surface_coarse)},
                   {"coarse_mesoscopic", SurfaceJson(surface_meso)},

@@ -118,6 +118,8 @@ struct CaptureEvalSummary {
   // visible_face_fraction) but not tracked, in all and the longest run of them
   // (the recovery time after an occlusion, in frames).
   int lost_visible_frames = 0, longest_loss_frames = 0;
+  // The smallest true_visible_fraction of the sequence (did an occluder cover the face?).
+  double min_visible_fraction = 1.0;
   SurfaceError surface_coarse, surface_meso, surface_full;    // means over surface frames
   std::string timing_json = "{}";  // copied from the capture's summary
   double fps = 0, tracking_share = 0, detail_share = 0;
