@@ -27,6 +27,7 @@
 #include "pipeline/capture/capture.h"
 #include "pipeline/training/trainer.h"
 #include "synth/actor.h"
+#include "synth/dataset.h"
 #include "synth/procedural_rig.h"
 #include "synth/sequence.h"
 #include "synth/studio.h"
@@ -44,6 +45,7 @@ void ExperimentDataset::VisitFields(OptionVisitor& v) {
   v.Field("scan_cameras", scan_cameras);
   v.Field("scan_lights", scan_lights);
   v.Field("scan_expressions", scan_expressions);
+  v.Field("scan_expression_count", scan_expression_count);
   v.Field("scan_samples", scan_samples);
   v.Field("capture", capture);
   v.Field("test_actors", test_actors);
@@ -56,6 +58,7 @@ void ExperimentDataset::VisitFields(OptionVisitor& v) {
   v.Field("landmark_noise_px", landmark_noise_px);
   v.Field("tracker_seed", tracker_seed);
   v.Field("mesh_every", mesh_every);
+  v.Field("exclusive_capture", exclusive_capture);
   v.Field("cache_salt", cache_salt);
 }
 
@@ -65,6 +68,11 @@ void ExperimentDataset::Check() const {
   CheckGe("dataset", "scan_cameras", scan_cameras, 1);
   Require(!scan_lights.empty(), "dataset.scan_lights must name at least one light rig");
   CheckGe("dataset", "scan_samples", scan_samples, 1);
+  CheckGe("dataset", "scan_expression_count", scan_expression_count, 0);
+  if (scan_expression_count > 0) {
+    const size_t available = scan_expressions.empty() ? ScanSetOptions().expressions.size() : scan_expressions.size();
+    CheckLe("dataset", "scan_expression_count", scan_expression_count, static_cast<double>(available));
+  }
   CheckGe("dataset", "test_actors", test_actors, 1);
   CheckGe("dataset", "test_seed", static_cast<double>(test_seed), 0);
   CheckOneOf("dataset", "preset", preset, SequencePresetNames());
@@ -425,6 +433,13 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
   const fs::path rig_file = rig.dir / "rig.crig";
 
   const int64_t training_seed = d.training_seed + seed_offset;
+  std::vector<std::string> expressions = d.scan_expressions;
+  // The first N expressions (all N of the list: the same scans, the same key).
+  const size_t listed = expressions.empty() ? ScanSetOptions().expressions.size() : expressions.size();
+  if (d.scan_expression_count > 0 && static_cast<size_t>(d.scan_expression_count) < listed) {
+    if (expressions.empty()) expressions = ScanSetOptions().expressions;
+    expressions.resize(static_cast<size_t>(d.scan_expression_count));
+  }
   const ExperimentStage scans = add(
       "scans",
       {{"actor", SectionOf(c, "actor")},
@@ -432,7 +447,7 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
        {"seed", training_seed},
        {"cameras", d.scan_cameras},
        {"lights", d.scan_lights},
-       {"expressions", d.scan_expressions},
+       {"expressions", expressions},
        {"samples", d.scan_samples}},
       {rig.key}, [&](const fs::path& dir) {
         std::vector<std::string> a = {"synth",     "scans",  "--rig",     rig_file.string(),
@@ -441,7 +456,7 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
                                       "--cameras", std::to_string(d.scan_cameras),
                                       "--lights",  Join(d.scan_lights, ","),
                                       "--samples", std::to_string(d.scan_samples)};
-        for (const auto& e : d.scan_expressions) {
+        for (const auto& e : expressions) {
           a.push_back("-e");
           a.push_back(e);
         }
@@ -520,12 +535,13 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
         });
     std::vector<std::string> capture_depends = {model.key, sequence.key};
     if (!tracker_key.empty()) capture_depends.push_back(tracker_key);
-    const ExperimentStage capture = add(
-        "capture",
-        {{"capture", SectionOf(c, "capture")},
-         {"landmarks", d.landmarks},
-         {"noise", d.landmark_noise_px},
-         {"mesh_every", d.mesh_every}},
+    json capture_inputs = {{"capture", SectionOf(c, "capture")},
+                           {"landmarks", d.landmarks},
+                           {"noise", d.landmark_noise_px},
+                           {"mesh_every", d.mesh_every}};
+    if (d.exclusive_capture) capture_inputs["exclusive"] = true;  // its timings were taken alone
+    add(
+        "capture", capture_inputs,
         capture_depends, [&](const fs::path& dir) {
           std::vector<std::string> a = {"capture", "-i", (sequence.dir / "dataset").string(), "--model",
                                         (model.dir / "model.cdm").string()};
@@ -541,6 +557,8 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
           a.insert(a.end(), {"--overwrite", "-o", (dir / "capture").string()});
           return a;
         });
+    stages.back().exclusive = d.exclusive_capture;
+    const ExperimentStage capture = stages.back();
     add("eval", {{"eval", SectionOf(c, "eval")}}, {capture.key, sequence.key}, [&](const fs::path& dir) {
       std::vector<std::string> a = {"eval", "--capture", (capture.dir / "capture").string(), "--dataset",
                                     (sequence.dir / "dataset").string(), "-o", dir.string()};
@@ -791,13 +809,17 @@ std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& 
 
   std::mutex mutex;
   std::condition_variable cv;
+  int running = 0;
+  bool exclusive_running = false;
   auto worker = [&] {
     std::unique_lock<std::mutex> lock(mutex);
     for (;;) {
       // The first pending stage whose inputs are done; fail those whose inputs failed.
+      // An exclusive stage (a timed capture) starts only when nothing else runs, and
+      // nothing starts beside it; once one is ready, no new stage starts before it.
       size_t pick = unique.size();
       bool any_pending = false;
-      for (size_t i = 0; i < unique.size(); ++i) {
+      for (size_t i = 0; i < unique.size() && !exclusive_running; ++i) {
         if (state[i] != kPending) continue;
         bool ready = true, failed = false;
         for (const auto& dep : unique[i].depends) {
@@ -817,6 +839,8 @@ std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& 
           break;
         }
       }
+      if (pick != unique.size() && unique[pick].exclusive && running > 0) pick = unique.size();  // wait for quiet
+      if (exclusive_running) any_pending = true;
       if (pick == unique.size()) {
         if (!any_pending) {
           cv.notify_all();
@@ -826,6 +850,8 @@ std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& 
         continue;
       }
       state[pick] = kRunning;
+      ++running;
+      exclusive_running = unique[pick].exclusive;
       const ExperimentStage& s = unique[pick];
       log(fmt::format("  {} {} …  {}", s.kind, s.key, CommandLine(s.argv)));
       lock.unlock();
@@ -851,6 +877,8 @@ std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& 
         error = fmt::format("{} stage: {}", s.kind, e.what());
       }
       lock.lock();
+      --running;
+      if (unique[pick].exclusive) exclusive_running = false;
       if (error.empty()) {
         state[pick] = kDone;
       } else {

@@ -54,6 +54,7 @@ struct ExperimentDataset {
   int scan_cameras = 3;              // cameras per scan
   std::vector<std::string> scan_lights = {"studio"};  // light rigs each scan is imaged under
   std::vector<std::string> scan_expressions;          // "name=w,…" per scan; empty: the studio's default 4
+  int scan_expression_count = 0;     // > 0: only the first N of those (expressions per actor)
   int scan_samples = 2;              // anti-aliasing samples per pixel axis of the scan images
   bool capture = true;               // false: the run ends at the model (training-only experiments)
   int test_actors = 1;               // novel actors captured per run (metrics are averaged over them)
@@ -66,6 +67,7 @@ struct ExperimentDataset {
   double landmark_noise_px = 0.0;    // ground-truth-prior noise, px
   int64_t tracker_seed = 1;          // seed of the landmark regressor's training (fixed across seeds)
   int mesh_every = 10;               // meshes written (and surface-evaluated) every N frames
+  bool exclusive_capture = false;    // run the capture alone (nothing beside it): its timings are clean
   std::string cache_salt;            // change to invalidate the cache after changing the method
   void VisitFields(OptionVisitor& v);
   void Check() const;
@@ -119,6 +121,7 @@ struct ExperimentStage {
   std::filesystem::path dir;        // cache/<kind>/<key>
   std::vector<std::string> argv;    // crease arguments (without the program)
   std::vector<std::string> depends; // keys of the stages it reads
+  bool exclusive = false;           // runs with no other stage beside it (timed captures)
 };
 
 // A stable 64-bit FNV-1a hash of `j.dump()` (keys are sorted), as 16 hex digits.

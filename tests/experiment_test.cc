@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <mutex>
 #include <set>
+#include <thread>
 
 #include "core/error.h"
 #include "core/json_io.h"
@@ -313,6 +314,43 @@ TEST(Experiment, ExperimentsRunTogetherShareTheirStages) {
   // are all shared with toy's wrinkle_frames runs, up to the capture).
   for (const auto& [cmd, n] : runs_of_stage) EXPECT_EQ(n, 1) << cmd;
   EXPECT_TRUE(fs::exists(root / "other" / "runs" / "base_seed1.json"));
+  fs::remove_all(root);
+}
+
+TEST(Experiment, AnExclusiveCaptureRunsAlone) {
+  std::string yaml = kConfig;
+  yaml.replace(yaml.find("  frames: 12"), 12, "  frames: 12\n  exclusive_capture: true");
+  const ExperimentConfig c = ParseExperimentConfig(yaml, "toy.yaml");
+  const fs::path root = TempDir("exclusive");
+  ExperimentRunnerOptions o;
+  o.program_version = "test";
+  o.cache = root / "cache";
+  o.out = root / "out";
+  o.jobs = 2;
+  std::mutex m;
+  int running = 0, max_beside_capture = 0, max_running = 0;
+  bool capture_running = false;
+  const ExperimentSummary s = RunExperiment(c, o, [&](const auto& argv, const auto& log) {
+    const bool capture = argv[0] == "capture";
+    {
+      std::lock_guard<std::mutex> lock(m);
+      ++running;
+      max_running = std::max(max_running, running);
+      if (capture) capture_running = true;
+      if (capture_running) max_beside_capture = std::max(max_beside_capture, running);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    const int rc = FakeExecute(argv, log);
+    {
+      std::lock_guard<std::mutex> lock(m);
+      --running;
+      if (capture) capture_running = false;
+    }
+    return rc;
+  });
+  EXPECT_EQ(s.runs_ok, 8);
+  EXPECT_EQ(max_beside_capture, 1);  // nothing ran beside a capture
+  EXPECT_EQ(max_running, 2);         // the other stages still ran two at a time
   fs::remove_all(root);
 }
 
