@@ -44,6 +44,8 @@ void CaptureEvalOptions::VisitFields(OptionVisitor& v) {
   v.Field("offset_search_mm", offset_search_mm);
   v.Field("offset_min_correlation", offset_min_correlation);
   v.Field("visible_face_fraction", visible_face_fraction);
+  v.Field("vectors_frame", vectors_frame);
+  v.Field("vectors_scale", vectors_scale);
 }
 
 void CaptureEvalOptions::Check() const {
@@ -209,6 +211,52 @@ bool BestVerticalOffset(const cv::Mat& D, const cv::Mat& G, const cv::Mat& mask,
 
 namespace {
 
+// Fig. 11: two panels of the frame around the face, each vertex's 2D error drawn
+// as a line from its true projection (magnified by `scale`).
+cv::Mat DrawErrorVectors(const cv::Mat& frame_rgb, const MatX2d& truth, const MatX2d& err_coarse,
+                         const MatX2d& err_refined, const std::vector<int>& visible, double coarse_px,
+                         double refined_px, double scale) {
+  double x0 = 1e9, y0 = 1e9, x1 = -1e9, y1 = -1e9;
+  for (int i : visible) {
+    x0 = std::min(x0, truth(i, 0));
+    y0 = std::min(y0, truth(i, 1));
+    x1 = std::max(x1, truth(i, 0));
+    y1 = std::max(y1, truth(i, 1));
+  }
+  const int pad = 20;
+  cv::Rect box(static_cast<int>(x0) - pad, static_cast<int>(y0) - pad, static_cast<int>(x1 - x0) + 2 * pad,
+               static_cast<int>(y1 - y0) + 2 * pad);
+  box &= cv::Rect(0, 0, frame_rgb.cols, frame_rgb.rows);
+  if (box.width < 8 || box.height < 8) return {};
+  const double zoom = std::max(1.0, 360.0 / box.height);
+  auto panel = [&](const MatX2d& err, const cv::Scalar& colour, const std::string& label) {
+    cv::Mat p;
+    cv::resize(frame_rgb(box), p, cv::Size(), zoom, zoom, cv::INTER_CUBIC);
+    p = p * 0.6;  // dim the frame under the vectors
+    // One vertex per 14 × 14 px cell of the panel, so the vectors stay readable.
+    std::map<std::pair<int, int>, int> cell;
+    for (int i : visible) {
+      if (!err.row(i).allFinite()) continue;
+      cell.emplace(std::make_pair(static_cast<int>((truth(i, 0) - box.x) * zoom / 14),
+                                  static_cast<int>((truth(i, 1) - box.y) * zoom / 14)),
+                   i);
+    }
+    for (const auto& [c, i] : cell) {
+      const cv::Point2d a((truth(i, 0) - box.x) * zoom, (truth(i, 1) - box.y) * zoom);
+      const cv::Point2d b(a.x + scale * err(i, 0) * zoom, a.y + scale * err(i, 1) * zoom);
+      cv::line(p, a, b, colour, 1, cv::LINE_AA);
+      cv::circle(p, a, 1, cv::Scalar(255, 255, 255), cv::FILLED, cv::LINE_AA);
+    }
+    cv::putText(p, label, cv::Point(6, 18), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+    return p;
+  };
+  cv::Mat out;
+  cv::hconcat(panel(err_coarse, cv::Scalar(255, 80, 60),
+                    fmt::format("global tracker: {:.2f} px (vectors x{:g})", coarse_px, scale)),
+              panel(err_refined, cv::Scalar(80, 255, 120), fmt::format("flow-refined: {:.2f} px", refined_px)), out);
+  return out;
+}
+
 fs::path TruthMapPath(const fs::path& dataset, const json& info, int frame) {
   std::string pattern = "maps/{frame:06d}_expression_displacement.exr";
   if (info.contains("files") && info["files"].contains("expression_displacement")) {
@@ -283,6 +331,9 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   MatX2d prev_err_coarse, prev_err_refined;
   cv::Mat prev_band_err;
   int prev_frame = -2, tracked_count = 0;
+  const int vectors_target = options.vectors_frame >= 0 ? options.vectors_frame
+                             : frames.empty()            ? -1
+                                                         : frames[frames.size() / 2];
   for (int index : frames) {
     FrameCaptureEval e;
     e.frame = index;
@@ -332,6 +383,20 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     if (!visible.empty()) {
       e.coarse_px = sc / visible.size();
       e.refined_px = sr / visible.size();
+    }
+    if (s.error_vectors.empty() && vectors_target >= 0 && index >= vectors_target && !visible.empty()) {
+      std::string pattern = "frames/{frame:06d}.png";
+      if (info.contains("files") && info["files"].contains("frame")) pattern = info["files"]["frame"].get<std::string>();
+      const fs::path frame_path = dataset / fmt::format(fmt::runtime(pattern), fmt::arg("frame", index));
+      if (fs::is_regular_file(frame_path)) {
+        cv::Mat img = ReadImage(frame_path, /*srgb=*/false), rgb8;
+        if (img.channels() == 1) cv::cvtColor(img, img, cv::COLOR_GRAY2RGB);
+        if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_RGBA2RGB);
+        img.convertTo(rgb8, CV_8U, 255.0);
+        s.error_vectors = DrawErrorVectors(rgb8, truth.vertices, err_c, err_r, visible, e.coarse_px, e.refined_px,
+                                           options.vectors_scale);
+        s.error_vectors_frame = index;
+      }
     }
     e.coarse_mm = MeanDistance(arrays.coarse, true_cam, face_ids);
     e.refined_mm = MeanDistance(arrays.refined, true_cam, face_ids);

@@ -66,6 +66,10 @@ struct CaptureEvalOptions {
   // A frame counts as "face visible" for the loss metrics when at least this
   // fraction of the face-chart vertices is visible in the ground truth.
   double visible_face_fraction = 0.5;
+  // The error-vector picture (Fig. 11): this frame (−1: the first tracked frame from
+  // the middle of the sequence on); vectors drawn magnified by vectors_scale.
+  int vectors_frame = -1;
+  double vectors_scale = 2.0;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
@@ -124,6 +128,11 @@ struct CaptureEvalSummary {
   std::string timing_json = "{}";  // copied from the capture's summary
   double fps = 0, tracking_share = 0, detail_share = 0;
   std::vector<FrameCaptureEval> per_frame;
+  // Fig. 11: the frame with the 2D error vectors of L^t (left) and L~^t (right),
+  // from the true projections of the visible face vertices (CV_8UC3, RGB); empty when
+  // no frame was drawn.
+  cv::Mat error_vectors;
+  int error_vectors_frame = -1;
 
   std::string ToMarkdown() const;
   std::string ToJson() const;

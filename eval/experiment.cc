@@ -648,7 +648,7 @@ std::string CsvCell(const json& v) {
 }  // namespace
 
 json CollectRunMetrics(const std::vector<ExperimentStage>& stages) {
-  json metrics = json::object(), curves = json::object();
+  json metrics = json::object(), curves = json::object(), images = json::object();
   std::vector<json> evals;
   for (const auto& s : stages) {
     if (s.kind == "pairs") {  // the extraction's report: timing, detail-extraction accuracy
@@ -683,6 +683,9 @@ json CollectRunMetrics(const std::vector<ExperimentStage>& stages) {
     } else if (s.kind == "eval") {
       const fs::path e = s.dir / "eval.json";
       if (fs::exists(e)) evals.push_back(ReadJsonFile(e));
+      // Pictures of the first sequence (Fig. 11's error vectors).
+      if (!images.contains("error_vectors") && fs::exists(s.dir / "error_vectors.png"))
+        images["error_vectors"] = (s.dir / "error_vectors.png").string();
     }
   }
   // The mean over the run's test sequences of every numeric metric.
@@ -718,7 +721,7 @@ json CollectRunMetrics(const std::vector<ExperimentStage>& stages) {
       curves["per_frame." + field] = series;
     }
   }
-  return json{{"metrics", metrics}, {"curves", curves}};
+  return json{{"metrics", metrics}, {"curves", curves}, {"images", images}};
 }
 
 namespace {
@@ -961,6 +964,7 @@ void CollectExperiment(PlannedExperiment& p, const std::map<std::string, size_t>
         const json m = CollectRunMetrics(run_stages[r]);
         j["metrics"] = m["metrics"];
         j["curves"] = m["curves"];
+        j["images"] = m["images"];
       } catch (const std::exception& e) {
         error = fmt::format("collecting metrics: {}", e.what());
       }

@@ -17,6 +17,7 @@ import argparse
 import json
 import math
 import os
+import shutil
 import sys
 
 import numpy as np
@@ -179,6 +180,7 @@ class Run:
         self.error = data.get("error", "")
         self.metrics = data.get("metrics") or {}
         self.curves = data.get("curves") or {}
+        self.images = data.get("images") or {}
         self.seconds = data.get("seconds")
         if not (self.seed is None or isinstance(self.seed, (int, str))):
             raise ValueError('"seed" is neither a number nor a string')
@@ -629,9 +631,30 @@ FIGURES = {"sweep": figure_sweep, "curve": figure_curve, "per_frame": figure_per
            "bar": figure_bar}
 
 
+def copy_image(exp, spec, fig_dir, base):
+    """Kind "image": a picture a run's stages made (e.g. eval's Fig. 11 error vectors),
+    from the first run (lowest seed) that has it and matches the optional "where"."""
+    name = spec["image"]
+    where = spec.get("where") or {}
+    cands = [r for r in exp.ok_runs() if isinstance(r.images.get(name), str)
+             and all(r.point.get(k) == v for k, v in where.items())]
+    if not cands:
+        raise ValueError(f'no run has the image "{name}"')
+    seed = min((r.seed for r in cands), key=value_key)
+    run = next(r for r in cands if r.seed == seed)
+    src = run.images[name]
+    if not os.path.isfile(src):
+        raise ValueError(f"{src}: missing")
+    shutil.copyfile(src, os.path.join(fig_dir, base + ".png"))
+    return f"run `{run.run_id}`"
+
+
 def draw_figure(exp, spec, fig_dir):
     """Writes the PNG and PDF; returns (png file name, caption)."""
     kind = spec.get("kind")
+    if kind == "image":
+        base = "".join(c if c.isalnum() or c in "-_." else "_" for c in f"{exp.file_name}_{spec['name']}")
+        return base, copy_image(exp, spec, fig_dir, base)
     if kind not in FIGURES:
         raise ValueError(f'unknown kind "{kind}"')
     fig, caption = FIGURES[kind](exp, spec)
@@ -744,8 +767,9 @@ def experiment_section(exp, fig_dir, claims_out):
                 L += [f"- {msg}", ""]
                 continue
             title = spec.get("title") or spec["name"]
+            pdf = "" if spec.get("kind") == "image" else f" ([pdf](figures/{base}.pdf))"
             L += [f"![{md_cell(title)}](figures/{base}.png)", "",
-                  f"*{md_cell(title)}* — {caption} ([pdf](figures/{base}.pdf)).", ""]
+                  f"*{md_cell(title)}* — {caption}{pdf}.", ""]
 
     claims = meta.get("claims") or []
     if claims:

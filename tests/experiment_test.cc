@@ -82,6 +82,7 @@ int FakeExecute(const std::vector<std::string>& argv, const fs::path& log) {
     }
   } else if (argv[0] == "eval") {
     const fs::path out = OutputAfter(argv, "-o");
+    std::ofstream(out / "error_vectors.png") << "png";
     WriteJsonFile(out / "eval.json",
                   json{{"tracking", {{"coarse_px", 6.0 + h}, {"refined_px", 5.0 + h}}},
                        {"per_frame", json::array({json{{"frame", 0}, {"refined_px", 1.0}}, json{{"frame", 1}, {"refined_px", nullptr}}})}});
@@ -209,7 +210,8 @@ TEST(Experiment, CacheKeysChangeExactlyWithTheirInputs) {
 json RunJsonWithoutTimes(const fs::path& file) {
   json j = ReadJsonFile(file);
   j.erase("stage_seconds");
-  j.erase("commands");  // they name the cache folder
+  j.erase("commands");  // they and the images' paths name the cache folder
+  j.erase("images");
   return j;
 }
 
@@ -276,6 +278,7 @@ TEST(Experiment, ARunResumedAfterAFailureEqualsAnUninterruptedOne) {
   EXPECT_EQ(run.at("metrics").at("pairs.training_pairs"), 100);
   EXPECT_GT(run.at("metrics").at("tracking.coarse_px").get<double>(), 6.0);
   EXPECT_EQ(run.at("curves").at("per_frame.refined_px"), json::array({1.0, nullptr}));
+  EXPECT_TRUE(fs::exists(run.at("images").at("error_vectors").get<std::string>()));
   std::ifstream csv(o.out / "results.csv");
   std::string header;
   std::getline(csv, header);

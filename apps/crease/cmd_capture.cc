@@ -310,6 +310,11 @@ void AddCaptureCommands(CLI::App& app) {
     WriteFileAtomic(dir / "eval.json", [&](std::ostream& o) { o << js << "\n"; });
     WriteFileAtomic(dir / "eval_frames.csv", [&](std::ostream& o) { o << csv; });
     WriteFileAtomic(dir / "eval.md", [&](std::ostream& o) { o << md; });
+    if (!s.error_vectors.empty()) {  // Fig. 11
+      WriteImage(dir / "error_vectors.png", s.error_vectors, {.srgb = false});
+      std::printf("wrote %s (frame %d: 2D error vectors of L^t and L~^t)\n",
+                  (dir / "error_vectors.png").string().c_str(), s.error_vectors_frame);
+    }
     std::printf("%s\nwrote %s/eval.{md,json} and eval_frames.csv\n", md.c_str(), dir.string().c_str());
   });
 }
