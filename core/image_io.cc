@@ -88,6 +88,9 @@ void WriteImage(const fs::path& path, const cv::Mat& image, const ImageWriteOpti
                               OIIO::geterror()));
     }
     OIIO::ImageSpec spec(data.cols, data.rows, c, format);
+    // A fixed date: OpenEXR writers stamp the current time otherwise, and the same
+    // inputs must give the same bytes (determinism, DESIGN.md).
+    spec.attribute("DateTime", "1970:01:01 00:00:00");
     if (format == OIIO::TypeDesc::UINT8 || format == OIIO::TypeDesc::UINT16) {
       spec.attribute("oiio:ColorSpace", options.srgb ? "sRGB" : "Linear");
     }

@@ -3,7 +3,9 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <chrono>
 #include <fstream>
+#include <thread>
 #include <opencv2/core.hpp>
 
 #include "core/error.h"
@@ -34,6 +36,18 @@ TEST(ImageIo, ExrPngRoundTripsSrgbAndErrors) {
     const cv::Mat back = ReadImage(p);
     ASSERT_EQ(back.type(), img.type());
     EXPECT_EQ(cv::norm(img, back, cv::NORM_INF), 0.0) << c << " channels";
+  }
+  // The same image written twice (a second apart) gives the same bytes: no time stamp.
+  {
+    auto bytes = [](const fs::path& p) {
+      std::ifstream in(p, std::ios::binary);
+      return std::string(std::istreambuf_iterator<char>(in), {});
+    };
+    const cv::Mat img = RandomImage(8, 8, 1, 9);
+    WriteImage(dir / "t1.exr", img);
+    std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+    WriteImage(dir / "t2.exr", img);
+    EXPECT_EQ(bytes(dir / "t1.exr"), bytes(dir / "t2.exr"));
   }
   // PNG 8-bit sRGB: every 8-bit code survives linear→sRGB→linear→sRGB.
   cv::Mat codes(1, 256, CV_32FC1);
