@@ -334,6 +334,12 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   const int vectors_target = options.vectors_frame >= 0 ? options.vectors_frame
                              : frames.empty()            ? -1
                                                          : frames[frames.size() / 2];
+  // The fraction of the face-chart vertices visible in the ground truth.
+  auto visible_fraction = [&](const auto& vertex_visible) {
+    int seen = 0;
+    for (int i : face_ids) seen += vertex_visible[i] ? 1 : 0;
+    return face_ids.empty() ? 0.0 : double(seen) / face_ids.size();
+  };
   for (int index : frames) {
     FrameCaptureEval e;
     e.frame = index;
@@ -341,10 +347,8 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     e.tracked = arrays.tracked;
     if (!e.tracked) {
       // Was the face there to be tracked? (the loss metrics)
-      const FrameTruth lost = ReadFrameTruth(dataset, index, truth_rig.num_vertices());
-      int seen = 0;
-      for (int i : face_ids) seen += lost.vertex_visible[i] ? 1 : 0;
-      e.true_visible_fraction = face_ids.empty() ? 0.0 : double(seen) / face_ids.size();
+      e.true_visible_fraction =
+          visible_fraction(ReadFrameTruth(dataset, index, truth_rig.num_vertices()).vertex_visible);
       prev_frame = -2;
       s.per_frame.push_back(e);
       continue;
@@ -375,11 +379,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       visible.push_back(i);
     }
     e.visible_vertices = static_cast<int>(visible.size());
-    {
-      int seen = 0;
-      for (int i : face_ids) seen += truth.vertex_visible[i] ? 1 : 0;
-      e.true_visible_fraction = face_ids.empty() ? 0.0 : double(seen) / face_ids.size();
-    }
+    e.true_visible_fraction = visible_fraction(truth.vertex_visible);
     if (!visible.empty()) {
       e.coarse_px = sc / visible.size();
       e.refined_px = sr / visible.size();

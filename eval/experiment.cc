@@ -177,7 +177,9 @@ std::string ShellQuote(const std::string& s) {
   return q + "'";
 }
 
-std::string CommandLine(const std::vector<std::string>& argv) {
+}  // namespace
+
+std::string ExperimentCommandLine(const std::vector<std::string>& argv) {
   std::string out = "crease";
   for (const auto& a : argv) {
     out += ' ';
@@ -185,6 +187,8 @@ std::string CommandLine(const std::vector<std::string>& argv) {
   }
   return out;
 }
+
+namespace {
 
 std::string SanitizeId(const std::string& s) {
   std::string out;
@@ -726,6 +730,9 @@ json CollectRunMetrics(const std::vector<ExperimentStage>& stages) {
 
 namespace {
 
+// A stage's state in the scheduler (and for the collector).
+enum StageState { kPending, kRunning, kDone, kFailed };
+
 // One experiment of a RunExperiments call: its runs and their stages.
 struct PlannedExperiment {
   ExperimentConfig config;
@@ -782,7 +789,6 @@ std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& 
     planned.push_back(std::move(p));
   }
 
-  enum State { kPending, kRunning, kDone, kFailed };
   std::vector<int> state(unique.size(), kPending);
   std::vector<std::string> failure(unique.size());
   for (size_t i = 0; i < unique.size(); ++i) {
@@ -856,7 +862,7 @@ std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& 
       ++running;
       exclusive_running = unique[pick].exclusive;
       const ExperimentStage& s = unique[pick];
-      log(fmt::format("  {} {} …  {}", s.kind, s.key, CommandLine(s.argv)));
+      log(fmt::format("  {} {} …  {}", s.kind, s.key, ExperimentCommandLine(s.argv)));
       lock.unlock();
       std::string error;
       const auto t0 = std::chrono::steady_clock::now();
@@ -866,14 +872,14 @@ std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& 
         fs::create_directories(s.dir);
         const int rc = executor(s.argv, s.dir / "log.txt");
         if (rc != 0) {
-          error = fmt::format("{} stage failed (exit status {}): {}\n{}", s.kind, rc, CommandLine(s.argv),
+          error = fmt::format("{} stage failed (exit status {}): {}\n{}", s.kind, rc, ExperimentCommandLine(s.argv),
                               TailOfFile(s.dir / "log.txt", 1500));
         } else {
           const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
           WriteJsonFile(s.dir / "stage.json", json{{"kind", s.kind},
                                                    {"key", s.key},
                                                    {"key_inputs", s.key_inputs},
-                                                   {"command", CommandLine(s.argv)},
+                                                   {"command", ExperimentCommandLine(s.argv)},
                                                    {"seconds", seconds}});
         }
       } catch (const std::exception& e) {
@@ -924,7 +930,6 @@ namespace {
 
 void CollectExperiment(PlannedExperiment& p, const std::map<std::string, size_t>& index,
                        const std::vector<int>& state, const std::vector<std::string>& failure) {
-  constexpr int kDone = 2;
   const ExperimentConfig& config = p.config;
   const ExperimentRunnerOptions& options = *p.options;
   const std::vector<ExperimentRun>& runs = p.runs;
@@ -944,7 +949,7 @@ void CollectExperiment(PlannedExperiment& p, const std::map<std::string, size_t>
     std::string error;
     double seconds = 0.0;
     for (const auto& s : run_stages[r]) {
-      commands.push_back(CommandLine(s.argv));
+      commands.push_back(ExperimentCommandLine(s.argv));
       keys[s.kind] = keys.contains(s.kind) ? json(keys[s.kind].get<std::string>() + "," + s.key) : json(s.key);
       const size_t i = index.at(s.key);
       if (state[i] != kDone && error.empty())

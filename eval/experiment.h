@@ -124,6 +124,9 @@ struct ExperimentStage {
   bool exclusive = false;           // runs with no other stage beside it (timed captures)
 };
 
+// "crease ARG …" with the arguments shell-quoted where needed (re-runnable as printed).
+std::string ExperimentCommandLine(const std::vector<std::string>& argv);
+
 // A stable 64-bit FNV-1a hash of `j.dump()` (keys are sorted), as 16 hex digits.
 std::string ExperimentKey(const nlohmann::json& j);
 

@@ -151,9 +151,7 @@ void AddExperimentCommands(CLI::App& app) {
           for (const auto& r : runs) {
             std::printf("  %s\n", r.id.c_str());
             for (const auto& s : PlanRunStages(r, o.cache, o.program_version)) {
-              std::string line = "crease";
-              for (const auto& a : s.argv) line += " " + a;
-              std::printf("    [%s %s] %s\n", s.kind.c_str(), s.key.c_str(), line.c_str());
+              std::printf("    [%s %s] %s\n", s.kind.c_str(), s.key.c_str(), ExperimentCommandLine(s.argv).c_str());
             }
           }
         }
