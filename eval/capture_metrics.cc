@@ -177,15 +177,16 @@ bool BestVerticalOffset(const cv::Mat& D, const cv::Mat& G, const cv::Mat& mask,
                         double* correlation) {
   double best = 0.0;
   bool found = false;
+  const cv::Rect box = cv::boundingRect(mask);  // texels outside the mask never count
   for (int s = -max_shift; s <= max_shift; ++s) {
     double sd = 0, sg = 0, sdd = 0, sgg = 0, sdg = 0;
     int64_t n = 0;
-    for (int y = std::max(0, -s); y < D.rows && y + s < D.rows; ++y) {
+    for (int y = std::max(box.y, -s); y < box.y + box.height && y + s < D.rows; ++y) {
       const float* d = D.ptr<float>(y + s);
       const float* g = G.ptr<float>(y);
       const uint8_t* m = mask.ptr<uint8_t>(y);
       const uint8_t* md = mask.ptr<uint8_t>(y + s);
-      for (int x = 0; x < D.cols; ++x) {
+      for (int x = box.x; x < box.x + box.width; ++x) {
         if (!m[x] || !md[x] || !std::isfinite(d[x]) || !std::isfinite(g[x])) continue;
         sd += d[x];
         sg += g[x];
@@ -305,7 +306,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   const cv::Mat coverage = CoverageMask(RasterizeUv(face_mesh, R, R, "rig face chart"));
   const cv::Mat wrinkle_mask = ValidRegionMask(rig.regions, options.wrinkle_regions, R, coverage);
   const double mm_per_texel = std::max(MmPerTexel(face_mesh, R), 1e-9);
-  const double band_sigma = options.band_mm / mm_per_texel;
+  const WrinkleBandMask band_mask = MakeWrinkleBandMask(coverage, options.band_mm / mm_per_texel);
   const cv::Mat offset_mask = ValidRegionMask(rig.regions, {options.offset_region}, R, coverage);
   const int offset_shift = static_cast<int>(std::lround(options.offset_search_mm / mm_per_texel));
 
@@ -430,7 +431,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       e.has_displacement = true;
       e.d_face = CompareMaps(D, G, coverage);
       e.d_wrinkle = CompareMaps(D, G, wrinkle_mask);
-      const cv::Mat Db = WrinkleBand(D, coverage, band_sigma), Gb = WrinkleBand(G, coverage, band_sigma);
+      const cv::Mat Db = WrinkleBand(D, band_mask), Gb = WrinkleBand(G, band_mask);
       e.d_face_band = CompareMaps(Db, Gb, coverage);
       e.d_wrinkle_band = CompareMaps(Db, Gb, wrinkle_mask);
       band_err = Db - Gb;

@@ -42,8 +42,9 @@ class OptionVisitor;
 
 struct CaptureEvalOptions {
   // Surface metrics of H^t on every this-many-th tracked frame (rebuilding the
-  // true high-resolution surface costs ~0.3 s per frame). 0 = none.
-  int surface_every = 5;
+  // true high-resolution surface costs ~0.35 s per frame, as much as all the other
+  // metrics of ~3 frames). 0 = none.
+  int surface_every = 10;
   // σ of the wrinkle band, mm on the face (as TrainingOptions::validation_band_mm).
   double band_mm = 2.0;
   // The regions of the wrinkle metrics (rig region masks).

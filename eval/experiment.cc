@@ -79,7 +79,7 @@ void ExperimentDataset::Check() const {
   CheckGe("dataset", "seconds", seconds, 0.0);
   CheckOneOf("dataset", "landmarks", landmarks, {"regressor", "dlib", "ground-truth-prior"});
   CheckGe("dataset", "landmark_noise_px", landmark_noise_px, 0.0);
-  CheckGe("dataset", "mesh_every", mesh_every, 1);
+  CheckGe("dataset", "mesh_every", mesh_every, 0);
 }
 
 namespace {
@@ -92,18 +92,25 @@ void ValidateAs(const json& j, const std::string& what) {
   SetOptionsFromJson(j.dump(), what, &o);
 }
 
+// A section's options at their defaults, as JSON.
+template <class Options>
+json DefaultsOf() {
+  return json::parse(OptionsToJson(Options()));
+}
+
 struct SectionInfo {
   const char* name;
   void (*validate)(const json&, const std::string&);
+  json (*defaults)();
 };
 
 const std::vector<SectionInfo>& Sections() {
   static const std::vector<SectionInfo> s = {
-      {"dataset", &ValidateAs<ExperimentDataset>},     {"rig", &ValidateAs<ProceduralRigOptions>},
-      {"actor", &ValidateAs<ActorOptions>},            {"test_actor", &ValidateAs<ActorOptions>},
-      {"studio", &ValidateAs<StudioOptions>},          {"training", &ValidateAs<TrainingOptions>},
-      {"tracker", &ValidateAs<TrackerTrainingOptions>}, {"capture", &ValidateAs<CaptureOptions>},
-      {"eval", &ValidateAs<CaptureEvalOptions>},
+      {"dataset", &ValidateAs<ExperimentDataset>, &DefaultsOf<ExperimentDataset>},     {"rig", &ValidateAs<ProceduralRigOptions>, &DefaultsOf<ProceduralRigOptions>},
+      {"actor", &ValidateAs<ActorOptions>, &DefaultsOf<ActorOptions>},            {"test_actor", &ValidateAs<ActorOptions>, &DefaultsOf<ActorOptions>},
+      {"studio", &ValidateAs<StudioOptions>, &DefaultsOf<StudioOptions>},          {"training", &ValidateAs<TrainingOptions>, &DefaultsOf<TrainingOptions>},
+      {"tracker", &ValidateAs<TrackerTrainingOptions>, &DefaultsOf<TrackerTrainingOptions>}, {"capture", &ValidateAs<CaptureOptions>, &DefaultsOf<CaptureOptions>},
+      {"eval", &ValidateAs<CaptureEvalOptions>, &DefaultsOf<CaptureEvalOptions>},
   };
   return s;
 }
@@ -146,6 +153,22 @@ ExperimentDataset DatasetOf(const ExperimentConfig& c) {
 json SectionOf(const ExperimentConfig& c, const std::string& name) {
   const auto it = c.sections.find(name);
   return it == c.sections.end() ? json::object() : it->second;
+}
+
+// A section as it enters cache keys: the options that differ from their defaults,
+// so a sweep value equal to the default (the paper's K = 1280 in a sweep of F) is
+// the same stage as leaving it unset.
+json KeySectionOf(const ExperimentConfig& c, const std::string& name) {
+  json section = SectionOf(c, name);
+  const json defaults = FindSection(name, "experiment").defaults();
+  for (auto it = section.begin(); it != section.end();) {
+    if (defaults.contains(it.key()) && defaults[it.key()] == it.value()) {
+      it = section.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  return section;
 }
 
 std::string ValueText(const json& v) {
@@ -429,7 +452,7 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
     return stages.back();
   };
 
-  const ExperimentStage rig = add("rig", {{"rig", SectionOf(c, "rig")}}, {}, [&](const fs::path& dir) {
+  const ExperimentStage rig = add("rig", {{"rig", KeySectionOf(c, "rig")}}, {}, [&](const fs::path& dir) {
     std::vector<std::string> a = {"synth", "rig", "-o", (dir / "rig.crig").string()};
     AppendSets(SectionOf(c, "rig"), &a);
     return a;
@@ -446,7 +469,7 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
   }
   const ExperimentStage scans = add(
       "scans",
-      {{"actor", SectionOf(c, "actor")},
+      {{"actor", KeySectionOf(c, "actor")},
        {"actors", d.training_actors},
        {"seed", training_seed},
        {"cameras", d.scan_cameras},
@@ -472,14 +495,19 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
   // Training in two stages: the pairs (Sec. 4.1–4.2, ~99 % of the time) and the
   // regression (Sec. 4.3), so that sweeps over the PCA dimension or the cascade's
   // K, F, P, β share the extraction.
+  const auto split_regression = [](json* extraction, json* regression) {
+    for (const auto& name : RegressionOptionNames()) {
+      if (!extraction->contains(name)) continue;
+      (*regression)[name] = (*extraction)[name];
+      extraction->erase(name);
+    }
+  };
   json extraction = SectionOf(c, "training"), regression = json::object();
-  for (const auto& name : RegressionOptionNames()) {
-    if (!extraction.contains(name)) continue;
-    regression[name] = extraction[name];
-    extraction.erase(name);
-  }
+  split_regression(&extraction, &regression);
+  json extraction_key = KeySectionOf(c, "training"), regression_key = json::object();
+  split_regression(&extraction_key, &regression_key);
   const ExperimentStage pairs =
-      add("pairs", {{"training", extraction}}, {rig.key, scans.key}, [&](const fs::path& dir) {
+      add("pairs", {{"training", extraction_key}}, {rig.key, scans.key}, [&](const fs::path& dir) {
         std::vector<std::string> a = {"train",         "--scans", (scans.dir / "scans").string(),
                                       "--rig",         rig_file.string(),
                                       "--save-pairs",  (dir / "pairs.cpr").string(),
@@ -488,7 +516,7 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
         return a;
       });
   const ExperimentStage model =
-      add("model", {{"training", regression}}, {pairs.key}, [&](const fs::path& dir) {
+      add("model", {{"training", regression_key}}, {pairs.key}, [&](const fs::path& dir) {
         std::vector<std::string> a = {"train", "--pairs", (pairs.dir / "pairs.cpr").string(), "--out",
                                       (dir / "model.cdm").string(), "--report", (dir / "report").string()};
         AppendSets(regression, &a);
@@ -499,7 +527,7 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
   std::string tracker_key;
   fs::path tracker_file;
   if (d.landmarks == "regressor") {
-    const ExperimentStage tracker = add("tracker", {{"tracker", SectionOf(c, "tracker")}, {"seed", d.tracker_seed}},
+    const ExperimentStage tracker = add("tracker", {{"tracker", KeySectionOf(c, "tracker")}, {"seed", d.tracker_seed}},
                                         {rig.key}, [&](const fs::path& dir) {
                                           std::vector<std::string> a = {"train-tracker", "--rig", rig_file.string(),
                                                                         "-o", (dir / "tracker.ctrk").string(),
@@ -514,7 +542,7 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
   for (int i = 0; i < d.test_actors; ++i) {
     const int64_t actor_seed = d.test_seed + seed_offset + i;
     const ExperimentStage actor =
-        add("actor", {{"actor", SectionOf(c, "test_actor")}, {"seed", actor_seed}}, {rig.key}, [&](const fs::path& dir) {
+        add("actor", {{"actor", KeySectionOf(c, "test_actor")}, {"seed", actor_seed}}, {rig.key}, [&](const fs::path& dir) {
           std::vector<std::string> a = {"synth", "actor", "--rig", rig_file.string(), "--seed", std::to_string(actor_seed),
                                         "-o", (dir / "actor.json").string()};
           AppendSets(SectionOf(c, "test_actor"), &a);
@@ -522,7 +550,7 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
         });
     const ExperimentStage sequence = add(
         "sequence",
-        {{"studio", SectionOf(c, "studio")},
+        {{"studio", KeySectionOf(c, "studio")},
          {"preset", d.preset},
          {"seconds", d.seconds},
          {"frames", d.frames},
@@ -539,7 +567,7 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
         });
     std::vector<std::string> capture_depends = {model.key, sequence.key};
     if (!tracker_key.empty()) capture_depends.push_back(tracker_key);
-    json capture_inputs = {{"capture", SectionOf(c, "capture")},
+    json capture_inputs = {{"capture", KeySectionOf(c, "capture")},
                            {"landmarks", d.landmarks},
                            {"noise", d.landmark_noise_px},
                            {"mesh_every", d.mesh_every}};
@@ -556,14 +584,18 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
           } else {
             a.insert(a.end(), {"--ground-truth-prior", "--noise", fmt::format("{}", d.landmark_noise_px)});
           }
-          a.insert(a.end(), {"--mesh-every", std::to_string(d.mesh_every)});
+          if (d.mesh_every > 0) {
+            a.insert(a.end(), {"--mesh-every", std::to_string(d.mesh_every)});
+          } else {
+            a.push_back("--no-meshes");
+          }
           AppendSets(SectionOf(c, "capture"), &a);
           a.insert(a.end(), {"--overwrite", "-o", (dir / "capture").string()});
           return a;
         });
     stages.back().exclusive = d.exclusive_capture;
     const ExperimentStage capture = stages.back();
-    add("eval", {{"eval", SectionOf(c, "eval")}}, {capture.key, sequence.key}, [&](const fs::path& dir) {
+    add("eval", {{"eval", KeySectionOf(c, "eval")}}, {capture.key, sequence.key}, [&](const fs::path& dir) {
       std::vector<std::string> a = {"eval", "--capture", (capture.dir / "capture").string(), "--dataset",
                                     (sequence.dir / "dataset").string(), "-o", dir.string()};
       AppendSets(SectionOf(c, "eval"), &a);

@@ -66,7 +66,9 @@ struct ExperimentDataset {
   std::string landmarks = "regressor";  // regressor | dlib | ground-truth-prior
   double landmark_noise_px = 0.0;    // ground-truth-prior noise, px
   int64_t tracker_seed = 1;          // seed of the landmark regressor's training (fixed across seeds)
-  int mesh_every = 10;               // meshes written (and surface-evaluated) every N frames
+  // Capture meshes written every N frames; 0 = none (eval rebuilds H^t itself, and
+  // a paper-size capture writes ~0.5 GB of meshes otherwise).
+  int mesh_every = 0;
   bool exclusive_capture = false;    // run the capture alone (nothing beside it): its timings are clean
   std::string cache_salt;            // change to invalidate the cache after changing the method
   void VisitFields(OptionVisitor& v);

@@ -14,6 +14,9 @@
 
 #include "core/error.h"
 #include "core/json_io.h"
+#include "core/options.h"
+#include "pipeline/capture/capture.h"
+#include "pipeline/training/trainer.h"
 
 namespace crease {
 namespace {
@@ -205,6 +208,18 @@ TEST(Experiment, CacheKeysChangeExactlyWithTheirInputs) {
   EXPECT_NE(a.at("sequence"), l.at("sequence"));
   // Two test actors per run: two actors, sequences, captures and evals.
   EXPECT_EQ(std::count(a.at("eval").begin(), a.at("eval").end(), ';'), 2);
+  // An option set to its default is the same stage as leaving it unset (the paper's
+  // K in a sweep of F), and a non-default value is not.
+  ExperimentConfig explicit_default = c;
+  const json training_defaults = json::parse(OptionsToJson(TrainingOptions()));
+  const json capture_defaults = json::parse(OptionsToJson(CaptureOptions()));
+  explicit_default.sections["training"]["fern_depth"] = training_defaults.at("fern_depth");
+  explicit_default.sections["capture"]["wrinkle_frames"] = capture_defaults.at("wrinkle_frames");
+  const auto e = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, "1"));
+  EXPECT_EQ(a, e);
+  explicit_default.sections["training"]["fern_depth"] = training_defaults.at("fern_depth").get<int>() + 1;
+  const auto e1 = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, "1"));
+  EXPECT_NE(a.at("model"), e1.at("model"));
 }
 
 json RunJsonWithoutTimes(const fs::path& file) {

@@ -472,20 +472,31 @@ double MmPerTexel(const TriMesh& mesh, int R) {
   return auv > 0 ? std::sqrt(a3 / auv) / R : 0.0;
 }
 
-cv::Mat WrinkleBand(const cv::Mat& d, const cv::Mat& mask, double sigma_texels) {
-  cv::Mat m, dm, bd, bm;
-  mask.convertTo(m, CV_32F, 1.0 / 255.0);
-  cv::multiply(d, m, dm);
-  cv::GaussianBlur(dm, bd, cv::Size(0, 0), sigma_texels);
-  cv::GaussianBlur(m, bm, cv::Size(0, 0), sigma_texels);
-  cv::Mat out = d.clone();
+WrinkleBandMask MakeWrinkleBandMask(const cv::Mat& mask, double sigma_texels) {
+  WrinkleBandMask m;
+  m.sigma_texels = sigma_texels;
+  mask.convertTo(m.mask, CV_32F, 1.0 / 255.0);
+  cv::GaussianBlur(m.mask, m.blurred, cv::Size(0, 0), sigma_texels);
+  return m;
+}
+
+cv::Mat WrinkleBand(const cv::Mat& d, const WrinkleBandMask& mask) {
+  cv::Mat dm, bd;
+  cv::multiply(d, mask.mask, dm);
+  cv::GaussianBlur(dm, bd, cv::Size(0, 0), mask.sigma_texels);
+  cv::Mat out(d.size(), CV_32F);
   for (int j = 0; j < d.rows; ++j) {
-    for (int i = 0; i < d.cols; ++i) {
-      const float w = bm.at<float>(j, i);
-      out.at<float>(j, i) = w > 1e-6f ? d.at<float>(j, i) - bd.at<float>(j, i) / w : 0.0f;
-    }
+    const float* dj = d.ptr<float>(j);
+    const float* bdj = bd.ptr<float>(j);
+    const float* w = mask.blurred.ptr<float>(j);
+    float* o = out.ptr<float>(j);
+    for (int i = 0; i < d.cols; ++i) o[i] = w[i] > 1e-6f ? dj[i] - bdj[i] / w[i] : 0.0f;
   }
   return out;
+}
+
+cv::Mat WrinkleBand(const cv::Mat& d, const cv::Mat& mask, double sigma_texels) {
+  return WrinkleBand(d, MakeWrinkleBandMask(mask, sigma_texels));
 }
 
 }  // namespace crease

@@ -173,4 +173,14 @@ double MmPerTexel(const TriMesh& mesh, int R);
 // wrinkle-layer ground truth does not.
 cv::Mat WrinkleBand(const cv::Mat& d, const cv::Mat& mask, double sigma_texels);
 
+// WrinkleBand's normaliser (the mask as float and its blur), for banding many maps
+// with one mask: the blur of the mask is then paid once.
+struct WrinkleBandMask {
+  cv::Mat mask;     // CV_32F in [0, 1]
+  cv::Mat blurred;  // its Gaussian blur of σ texels
+  double sigma_texels = 0.0;
+};
+WrinkleBandMask MakeWrinkleBandMask(const cv::Mat& mask, double sigma_texels);
+cv::Mat WrinkleBand(const cv::Mat& d, const WrinkleBandMask& mask);
+
 }  // namespace crease
