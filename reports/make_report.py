@@ -711,7 +711,7 @@ def describe_machine(machine):
     return str(machine) if machine else DASH
 
 
-def experiment_section(exp, fig_dir, claims_out):
+def experiment_section(exp, fig_dir, claims_out, fig_link="figures"):
     meta = exp.meta
     L = [f"## {meta.get('title') or exp.name}", ""]
     if meta.get("paper"):
@@ -767,8 +767,8 @@ def experiment_section(exp, fig_dir, claims_out):
                 L += [f"- {msg}", ""]
                 continue
             title = spec.get("title") or spec["name"]
-            pdf = "" if spec.get("kind") == "image" else f" ([pdf](figures/{base}.pdf))"
-            L += [f"![{md_cell(title)}](figures/{base}.png)", "",
+            pdf = "" if spec.get("kind") == "image" else f" ([pdf]({fig_link}/{base}.pdf))"
+            L += [f"![{md_cell(title)}]({fig_link}/{base}.png)", "",
                   f"*{md_cell(title)}* — {caption}{pdf}.", ""]
 
     claims = meta.get("claims") or []
@@ -792,7 +792,10 @@ def experiment_section(exp, fig_dir, claims_out):
     return L
 
 
-def make_report(results_dir, out_dir):
+def make_report(results_dir, out_dir, markdown=None):
+    """`markdown`: where the report's Markdown goes (default OUT/report.md); its figure
+    links are relative to it."""
+    markdown = markdown or os.path.join(out_dir, "report.md")
     exps, skipped = find_experiments(results_dir)
     for msg in skipped:
         warn(msg)
@@ -801,12 +804,15 @@ def make_report(results_dir, out_dir):
         return 1
     fig_dir = os.path.join(out_dir, "figures")
     os.makedirs(fig_dir, exist_ok=True)
+    md_dir = os.path.dirname(os.path.abspath(markdown))
+    os.makedirs(md_dir, exist_ok=True)
+    fig_link = os.path.relpath(os.path.abspath(fig_dir), md_dir).replace(os.sep, "/")
 
     claims, sections, reported = [], [], []
     for e in exps:
         n_claims = len(claims)
         try:
-            sections += experiment_section(e, fig_dir, claims)
+            sections += experiment_section(e, fig_dir, claims, fig_link)
             reported.append(e)
         except Exception as err:  # a bug or an input this script did not foresee
             del claims[n_claims:]
@@ -839,12 +845,12 @@ def make_report(results_dir, out_dir):
         H += ["No claims."]
     H.append("")
 
-    with open(os.path.join(out_dir, "report.md"), "w", encoding="utf-8") as f:
+    with open(markdown, "w", encoding="utf-8") as f:
         f.write("\n".join(H + sections).rstrip("\n") + "\n")
     with open(os.path.join(out_dir, "claims.json"), "w", encoding="utf-8") as f:
         json.dump(claims, f, indent=1, sort_keys=True, ensure_ascii=False)
         f.write("\n")
-    print(f"report: wrote {os.path.join(out_dir, 'report.md')} "
+    print(f"report: wrote {markdown} "
           f"({plural(len(exps), 'experiment')}, {plural(len(claims), 'claim')})")
     return 0
 
@@ -855,13 +861,16 @@ def main(argv=None):
                     help="an experiment folder or a folder of experiment folders")
     ap.add_argument("-o", "--out", metavar="OUT",
                     help="where report.md, claims.json and figures/ go (default RESULTS_DIR)")
+    ap.add_argument("--markdown", metavar="FILE",
+                    help="write the report's Markdown here instead of OUT/report.md "
+                    "(its figure links are relative to FILE)")
     a = ap.parse_args(argv)
     if not os.path.isdir(a.results_dir):
         warn(f"{a.results_dir}: not a folder")
         return 2
     out = a.out or a.results_dir
     os.makedirs(out, exist_ok=True)
-    return make_report(a.results_dir, out)
+    return make_report(a.results_dir, out, a.markdown)
 
 
 if __name__ == "__main__":

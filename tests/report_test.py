@@ -168,6 +168,19 @@ class Report(unittest.TestCase):
                     open(os.path.join(out2, rel), "rb") as b:
                 self.assertEqual(a.read(), b.read(), rel)
 
+    def test_markdown_elsewhere_links_the_figures_relative_to_it(self):
+        # reports/REPRODUCTION.md with its figures in reports/paper/figures/.
+        top = os.path.join(self.tmp, "reports")
+        out = os.path.join(top, "paper")
+        md_path = os.path.join(top, "REPRODUCTION.md")
+        code, _, err = run_report(self.results, "-o", out, "--markdown", md_path)
+        self.assertEqual(code, 0, err)
+        md = read(md_path)
+        self.assertFalse(os.path.exists(os.path.join(out, "report.md")))
+        for name in FIGURES:
+            self.assertIn(f"](paper/figures/{name}.png)", md)
+            self.assertTrue(os.path.isfile(os.path.join(out, "figures", name + ".png")), name)
+
     def test_bad_inputs(self):
         bad_run = "training.num_ferns=80_seed1.json"
         with open(os.path.join(self.results, "ferns", "runs", bad_run), "w") as f:

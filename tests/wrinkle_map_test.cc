@@ -38,6 +38,7 @@ TEST(WrinkleMapOptionsTest, DefaultsArePaperValues) {
   EXPECT_EQ(o.wrinkle_threshold, 0.005);
   EXPECT_EQ(o.patch_regions,
             (std::vector<std::string>{"forehead", "glabella", "left_eye", "right_eye", "left_cheek", "right_cheek"}));
+  EXPECT_TRUE(o.patch_exclude_regions.empty());  // Difference 5 is opt-in
   o.Check();
   EXPECT_DOUBLE_EQ(SigmaScale(o, 1024), 1.0);
   EXPECT_DOUBLE_EQ(SigmaScale(o, 512), 0.5);
@@ -222,6 +223,32 @@ TEST(WrinkleMapTest, RegionsRestrictTheMapAndResample) {
   EXPECT_GT(map.probability.at<float>(64, 20), 0.0f);
   EXPECT_EQ(map.probability.at<float>(64, 100), 0.0f);
   EXPECT_EQ(cv::countNonZero((map.probability > 0) & (map.valid == 0)), 0);
+}
+
+TEST(WrinkleMapTest, ExcludedRegionsAreCutOutWithTheirMargin) {
+  const int S = 128;
+  RegionMask forehead{"forehead", cv::Mat(64, 64, CV_8U, cv::Scalar(255))};
+  RegionMask brow{"brow_left", cv::Mat(64, 64, CV_8U, cv::Scalar(0))};
+  brow.mask(cv::Rect(16, 30, 32, 4)).setTo(255);  // a bar: texels x 32…95, y 60…67 of the map
+  WrinkleMapOptions o = TexelOptions();
+  o.patch_regions = {"forehead"};
+  o.patch_exclude_regions = {"brow_left", "brow_right"};  // the rig has no brow_right: skipped
+  o.patch_exclude_margin = 5.0;
+  const cv::Mat valid = PatchRegionMask({forehead, brow}, o, S);
+  EXPECT_EQ(valid.at<uint8_t>(64, 64), 0);     // on the brow
+  EXPECT_EQ(valid.at<uint8_t>(55, 64), 0);     // 5 texels above it: inside the margin
+  EXPECT_EQ(valid.at<uint8_t>(53, 64), 255);   // 7 texels above: outside
+  EXPECT_EQ(valid.at<uint8_t>(64, 20), 255);   // beside the bar's end, beyond the margin
+  // The 64 × 8 bar grown by a disk of radius 5: 512 + 2·72·5 + π·25 ≈ 1310 texels.
+  EXPECT_NEAR(S * S - cv::countNonZero(valid), 1310, 30);
+  // Without brows in the rig, or with no exclusions, the valid region is the named one.
+  EXPECT_EQ(cv::countNonZero(PatchRegionMask({forehead}, o, S)), S * S);
+  o.patch_exclude_regions.clear();
+  EXPECT_EQ(cv::countNonZero(PatchRegionMask({forehead, brow}, o, S)), S * S);
+  // A line on the brow leaves no wrinkle map there.
+  o.patch_exclude_regions = {"brow_left"};
+  const WrinkleMap map = ComputeWrinkleMap({LineTexture(S, 0.0)}, cv::Mat(), {forehead, brow}, o);
+  EXPECT_EQ(cv::countNonZero((map.probability > 0) & (valid == 0)), 0);
 }
 
 TEST(WrinkleMapTest, BuilderAddsFramesOneByOne) {

@@ -184,14 +184,17 @@ void AddExperimentCommands(CLI::App& app) {
   }
   {
     auto* cmd = app.add_subcommand("report", "Figures and a Markdown report of experiment results (reports/)");
-    static std::string results, out;
+    static std::string results, out, markdown;
     cmd->add_option("results", results, "Results folder (one experiment, or a folder of experiments)")->required();
     cmd->add_option("--out,-o", out, "Report folder (default: the results folder)");
+    cmd->add_option("--markdown", markdown,
+                    "The report's Markdown file (default OUT/report.md; figure links relative to it)");
     cmd->callback([] {
       const fs::path script = SourceDir() / "reports" / "make_report.py";
       RequireReadableFile(script);
       std::vector<std::string> args = {"/usr/bin/python3", script.string(), results};
       if (!out.empty()) args.insert(args.end(), {"-o", out});
+      if (!markdown.empty()) args.insert(args.end(), {"--markdown", markdown});
       std::vector<char*> cargs;
       for (auto& a : args) cargs.push_back(a.data());
       cargs.push_back(nullptr);

@@ -22,6 +22,8 @@ void WrinkleMapOptions::VisitFields(OptionVisitor& v) {
   v.Field("dog_reference_resolution", dog_reference_resolution);
   v.Field("wrinkle_threshold", wrinkle_threshold);
   v.Field("patch_regions", patch_regions);
+  v.Field("patch_exclude_regions", patch_exclude_regions);
+  v.Field("patch_exclude_margin", patch_exclude_margin);
   v.Field("orientation_gradient_sigma", orientation_gradient_sigma);
   v.Field("orientation_smoothing_sigma", orientation_smoothing_sigma);
 }
@@ -36,6 +38,8 @@ void WrinkleMapOptions::Check() const {
   CheckGe(o, "orientation_gradient_sigma", orientation_gradient_sigma, 0.0);
   CheckLe(o, "orientation_gradient_sigma", orientation_gradient_sigma, 1000.0);
   CheckGe(o, "orientation_smoothing_sigma", orientation_smoothing_sigma, 0.0);
+  CheckGe(o, "patch_exclude_margin", patch_exclude_margin, 0.0);
+  CheckLe(o, "patch_exclude_margin", patch_exclude_margin, 1000.0);
   CheckLe(o, "orientation_smoothing_sigma", orientation_smoothing_sigma, 1000.0);
   for (size_t k = 0; k < patch_regions.size(); ++k) {
     Require(!patch_regions[k].empty(),
@@ -278,6 +282,29 @@ cv::Mat ValidRegionMask(const std::vector<RegionMask>& regions, const std::vecto
   return valid;
 }
 
+cv::Mat PatchRegionMask(const std::vector<RegionMask>& regions, const WrinkleMapOptions& options, int map_size,
+                        const cv::Mat& coverage) {
+  cv::Mat valid = ValidRegionMask(regions, options.patch_regions, map_size, coverage);
+  std::vector<std::string> present;
+  for (const std::string& name : options.patch_exclude_regions) {
+    for (const RegionMask& r : regions) {
+      if (r.name == name) {
+        present.push_back(name);
+        break;
+      }
+    }
+  }
+  if (present.empty()) return valid;
+  cv::Mat excluded = ValidRegionMask(regions, present, map_size);
+  const int margin = static_cast<int>(std::lround(options.patch_exclude_margin * SigmaScale(options, map_size)));
+  if (margin > 0) {
+    const cv::Mat disk = cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * margin + 1, 2 * margin + 1));
+    cv::dilate(excluded, excluded, disk);
+  }
+  valid.setTo(0, excluded);
+  return valid;
+}
+
 cv::Mat WrinkleProbability(const std::vector<cv::Mat>& responses, const cv::Mat& valid, double alpha) {
   Require(!responses.empty(), "WrinkleProbability: no responses (need at least one texture)");
   const cv::Size size = responses[0].size();
@@ -317,7 +344,7 @@ WrinkleMapBuilder::WrinkleMapBuilder(int map_size, const cv::Mat& coverage, cons
   options.Check();
   Require(map_size >= 2, fmt::format("WrinkleMapBuilder: map size {} must be >= 2", map_size));
   coverage_ = PrepareCoverage(coverage, map_size, "WrinkleMapBuilder");
-  valid_ = ValidRegionMask(regions, options.patch_regions, map_size, coverage_);
+  valid_ = PatchRegionMask(regions, options, map_size, coverage_);
   filter_ = std::make_shared<const DogFilter>(coverage_, options_);
   response_sum_ = cv::Mat(map_size, map_size, CV_32F, cv::Scalar(0));
   count_ = cv::Mat(map_size, map_size, CV_32S, cv::Scalar(0));
