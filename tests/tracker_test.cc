@@ -169,13 +169,14 @@ TEST(Tracker, RecoversAfterTheOcclusionPreset) {
   auto frames = OpenFrameSource(d);
   FaceTracker tracker(Rig(), frames->info().camera->intrinsics, std::make_unique<DlibLandmarkSource>(), TrackerOptions{});
   cv::Mat f;
-  int lost_while_occluded = 0, occluded = 0, recovered = 0, late = 0, early = 0;
+  int lost_while_occluded = 0, occluded = 0, recovered = 0, late = 0, early = 0, max_hidden = 0;
   double late_error = 0.0, early_error = 0.0;
   while (frames->Next(&f)) {
     const TrackedFrame t = tracker.Track(f);
     const FrameTruth truth = ReadFrameTruth(d, t.frame, Rig().num_vertices());
     int hidden = 0;
     for (char v : truth.landmark_visible) hidden += !v;
+    max_hidden = std::max(max_hidden, hidden);
     if (hidden > 34) {
       ++occluded;
       lost_while_occluded += !t.tracked;
@@ -197,6 +198,7 @@ TEST(Tracker, RecoversAfterTheOcclusionPreset) {
               occluded, lost_while_occluded, recovered, late, recovered ? late_error / recovered : 0.0,
               early ? early_error / early : 0.0);
   EXPECT_GT(occluded, 3);
+  EXPECT_EQ(max_hidden, 68);  // mid-pass the ball hides the whole face
   ASSERT_EQ(early, 10);
   EXPECT_EQ(recovered, late);
   // As good as before the ball came (dlib's own error on this face is ~11 px at 320×240).
