@@ -792,9 +792,18 @@ def experiment_section(exp, fig_dir, claims_out, fig_link="figures"):
     return L
 
 
-def make_report(results_dir, out_dir, markdown=None):
+def make_report(results_dir, out_dir, markdown=None, preface=None):
     """`markdown`: where the report's Markdown goes (default OUT/report.md); its figure
-    links are relative to it."""
+    links are relative to it. `preface`: a Markdown file put after the introduction
+    (how the results were made, caveats), so it survives regeneration."""
+    preface_text = ""
+    if preface:
+        try:
+            with open(preface, encoding="utf-8") as f:
+                preface_text = f.read().strip()
+        except OSError as e:
+            warn(f"{preface}: cannot read the preface ({e.strerror})")
+            return 2
     markdown = markdown or os.path.join(out_dir, "report.md")
     exps, skipped = find_experiments(results_dir)
     for msg in skipped:
@@ -832,6 +841,8 @@ def make_report(results_dir, out_dir, markdown=None):
          f"in `{os.path.basename(os.path.normpath(os.path.abspath(results_dir)))}/` "
          "(written by `reports/make_report.py`).", "",
          "Experiments: " + ", ".join(f"`{e.name}`" for e in exps) + ".", ""]
+    if preface_text:
+        H += [preface_text, ""]
     if skipped:
         H += ["**Skipped:**", ""] + [f"- {m}" for m in skipped] + [""]
     H += ["## Summary of claims", ""]
@@ -864,13 +875,15 @@ def main(argv=None):
     ap.add_argument("--markdown", metavar="FILE",
                     help="write the report's Markdown here instead of OUT/report.md "
                     "(its figure links are relative to FILE)")
+    ap.add_argument("--preface", metavar="FILE",
+                    help="Markdown put after the report's introduction (how it was made, caveats)")
     a = ap.parse_args(argv)
     if not os.path.isdir(a.results_dir):
         warn(f"{a.results_dir}: not a folder")
         return 2
     out = a.out or a.results_dir
     os.makedirs(out, exist_ok=True)
-    return make_report(a.results_dir, out, a.markdown)
+    return make_report(a.results_dir, out, a.markdown, a.preface)
 
 
 if __name__ == "__main__":

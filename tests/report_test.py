@@ -173,9 +173,18 @@ class Report(unittest.TestCase):
         top = os.path.join(self.tmp, "reports")
         out = os.path.join(top, "paper")
         md_path = os.path.join(top, "REPRODUCTION.md")
-        code, _, err = run_report(self.results, "-o", out, "--markdown", md_path)
+        preface = os.path.join(self.tmp, "preface.md")
+        with open(preface, "w", encoding="utf-8") as f:
+            f.write("## How this was made\n\nOn two cores.\n")
+        code, _, err = run_report(self.results, "-o", out, "--markdown", md_path, "--preface", preface)
         self.assertEqual(code, 0, err)
         md = read(md_path)
+        # The preface sits between the introduction and the summary.
+        self.assertLess(md.index("Experiments: "), md.index("## How this was made\n\nOn two cores."))
+        self.assertLess(md.index("On two cores."), md.index("## Summary of claims"))
+        code, _, err = run_report(self.results, "-o", out, "--preface", preface + ".missing")
+        self.assertEqual(code, 2)
+        self.assertIn("preface.md.missing: cannot read the preface", err)
         self.assertFalse(os.path.exists(os.path.join(out, "report.md")))
         for name in FIGURES:
             self.assertIn(f"](paper/figures/{name}.png)", md)

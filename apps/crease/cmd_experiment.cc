@@ -184,17 +184,19 @@ void AddExperimentCommands(CLI::App& app) {
   }
   {
     auto* cmd = app.add_subcommand("report", "Figures and a Markdown report of experiment results (reports/)");
-    static std::string results, out, markdown;
+    static std::string results, out, markdown, preface;
     cmd->add_option("results", results, "Results folder (one experiment, or a folder of experiments)")->required();
     cmd->add_option("--out,-o", out, "Report folder (default: the results folder)");
     cmd->add_option("--markdown", markdown,
                     "The report's Markdown file (default OUT/report.md; figure links relative to it)");
+    cmd->add_option("--preface", preface, "Markdown put after the report's introduction (how it was made, caveats)");
     cmd->callback([] {
       const fs::path script = SourceDir() / "reports" / "make_report.py";
       RequireReadableFile(script);
       std::vector<std::string> args = {"/usr/bin/python3", script.string(), results};
       if (!out.empty()) args.insert(args.end(), {"-o", out});
       if (!markdown.empty()) args.insert(args.end(), {"--markdown", markdown});
+      if (!preface.empty()) args.insert(args.end(), {"--preface", preface});
       std::vector<char*> cargs;
       for (auto& a : args) cargs.push_back(a.data());
       cargs.push_back(nullptr);
