@@ -24,6 +24,8 @@ void ScannedHeadOptions::VisitFields(OptionVisitor& v) {
   v.Field("displacement_midlevel", displacement_midlevel);
   v.Field("grid_resolution", grid_resolution);
   v.Field("phong_alpha", phong_alpha);
+  v.Field("normal_map_space", normal_map_space);
+  v.Field("normal_map_green_down", normal_map_green_down);
 }
 
 void ScannedHeadOptions::Check() const {
@@ -33,9 +35,22 @@ void ScannedHeadOptions::Check() const {
   CheckLe(o, "grid_resolution", grid_resolution, 8192);
   CheckGe(o, "phong_alpha", phong_alpha, 0.0);
   CheckLe(o, "phong_alpha", phong_alpha, 1.0);
+  CheckOneOf(o, "normal_map_space", normal_map_space, {"tangent", "object"});
 }
 
 namespace {
+
+// The UV grid the scan is resampled on, the way the studio builds its actors: the scan
+// is a rig without blendshapes.
+HiResLayout GridLayoutOf(const TriMesh& scan, const ScannedHeadOptions& options, int map_size,
+                         const std::filesystem::path& mesh_path) {
+  FaceRig as_rig;
+  as_rig.neutral = scan;
+  as_rig.neutral.N.resize(0, 3);
+  HiResLayout layout = BuildHiResLayout(as_rig, options.grid_resolution, map_size);
+  Require(layout.num_vertices() > 0, fmt::format("{}: no triangle of the UV layout lies inside [0,1]²", mesh_path.string()));
+  return layout;
+}
 
 // Reads `count` elements of an accessor as doubles (`components` each).
 std::vector<double> ReadAccessor(const tinygltf::Model& model, int index, int components, const std::string& what,
@@ -158,8 +173,76 @@ TriMesh ReadGltfMesh(const std::filesystem::path& path, cv::Mat* base_color) {
   return m;
 }
 
+MatX3d NormalsFromNormalMap(const TriMesh& mesh, const cv::Mat& normal_map, const ScannedHeadOptions& options) {
+  Require(normal_map.type() == CV_32FC3, "NormalsFromNormalMap: the normal map must be CV_32FC3");
+  Require(mesh.has_uv(), "NormalsFromNormalMap: the mesh has no UV coordinates");
+  const MatX3d N = mesh.N.rows() == mesh.num_vertices() ? mesh.N : VertexNormals(mesh);
+  const int nv = mesh.num_vertices();
+  // Per-vertex ∂p/∂u and ∂p/∂v (v downwards), area-weighted over the adjacent faces.
+  MatX3d Tu = MatX3d::Zero(nv, 3), Tv = MatX3d::Zero(nv, 3);
+  if (options.normal_map_space == "tangent") {
+    for (int f = 0; f < mesh.num_faces(); ++f) {
+      const int a = mesh.F(f, 0), b = mesh.F(f, 1), c = mesh.F(f, 2);
+      const Eigen::Vector3d e1 = (mesh.V.row(b) - mesh.V.row(a)).transpose(), e2 = (mesh.V.row(c) - mesh.V.row(a)).transpose();
+      const double du1 = mesh.UV(b, 0) - mesh.UV(a, 0), dv1 = mesh.UV(b, 1) - mesh.UV(a, 1);
+      const double du2 = mesh.UV(c, 0) - mesh.UV(a, 0), dv2 = mesh.UV(c, 1) - mesh.UV(a, 1);
+      const double det = du1 * dv2 - du2 * dv1;
+      if (std::abs(det) < 1e-14) continue;
+      // e = ∂p/∂u · du + ∂p/∂v · dv for both edges, solved for the two derivatives;
+      // weighted by the face's UV area (|det| / 2) so large faces count more.
+      const Eigen::Vector3d pu = (e1 * dv2 - e2 * dv1) / det, pv = (e2 * du1 - e1 * du2) / det;
+      const double w = 0.5 * std::abs(det);
+      for (int k : {a, b, c}) {
+        Tu.row(k) += w * pu.transpose();
+        Tv.row(k) += w * pv.transpose();
+      }
+    }
+  }
+  const int W = normal_map.cols, H = normal_map.rows;
+  MatX3d out(nv, 3);
+  for (int i = 0; i < nv; ++i) {
+    // Bilinear at the UV (texel centres at (k + 0.5) / size, v downwards like the rows).
+    const double x = std::clamp(mesh.UV(i, 0) * W - 0.5, 0.0, W - 1.0);
+    const double y = std::clamp(mesh.UV(i, 1) * H - 0.5, 0.0, H - 1.0);
+    const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+    const int x1 = std::min(x0 + 1, W - 1), y1 = std::min(y0 + 1, H - 1);
+    const double fx = x - x0, fy = y - y0;
+    Eigen::Vector3d m = Eigen::Vector3d::Zero();
+    const auto add = [&](int yy, int xx, double w) {
+      const cv::Vec3f& p = normal_map.at<cv::Vec3f>(yy, xx);
+      m += w * Eigen::Vector3d(2.0 * p[0] - 1.0, 2.0 * p[1] - 1.0, 2.0 * p[2] - 1.0);
+    };
+    add(y0, x0, (1 - fx) * (1 - fy));
+    add(y0, x1, fx * (1 - fy));
+    add(y1, x0, (1 - fx) * fy);
+    add(y1, x1, fx * fy);
+    const Eigen::Vector3d n = N.row(i).transpose();
+    Eigen::Vector3d s;
+    if (options.normal_map_space == "object") {
+      s = m;
+    } else {
+      Eigen::Vector3d t = Tu.row(i).transpose();
+      t -= n.dot(t) * n;
+      // OpenGL maps: green along +v of the file, which is −v here (v downwards).
+      Eigen::Vector3d up = options.normal_map_green_down ? Eigen::Vector3d(Tv.row(i).transpose())
+                                                        : Eigen::Vector3d(-Tv.row(i).transpose());
+      if (t.norm() < 1e-12) {  // no UV derivative here: keep the geometric normal
+        out.row(i) = n.transpose();
+        continue;
+      }
+      t.normalize();
+      Eigen::Vector3d b = n.cross(t);
+      if (b.dot(up) < 0) b = -b;  // mirrored UVs
+      s = m.x() * t + m.y() * b + m.z() * n;
+    }
+    out.row(i) = (s.norm() > 1e-12 ? s.normalized() : n).transpose();
+  }
+  return out;
+}
+
 ScannedHead LoadScannedHead(const std::filesystem::path& mesh_path, const std::filesystem::path& albedo_path,
-                            const std::filesystem::path& displacement_path, const ScannedHeadOptions& options) {
+                            const std::filesystem::path& displacement_path, const ScannedHeadOptions& options,
+                            const std::filesystem::path& normal_path) {
   options.Check();
   const std::string ext = LowerExtension(mesh_path);
   Require(ext == ".obj" || ext == ".ply" || ext == ".gltf" || ext == ".glb",
@@ -191,8 +274,25 @@ ScannedHead LoadScannedHead(const std::filesystem::path& mesh_path, const std::f
   head.materials.face = MaterialPreset("skin");
   head.materials.face.textured = true;
 
-  if (displacement_path.empty()) {
+  cv::Mat normal_map;
+  if (!normal_path.empty()) {
+    normal_map = ReadImage(normal_path, /*srgb=*/false);
+    Require(normal_map.channels() == 3 || normal_map.channels() == 4,
+            fmt::format("{}: a normal map must have three channels (RGB), not {}", normal_path.string(),
+                        normal_map.channels()));
+    if (normal_map.channels() == 4) cv::cvtColor(normal_map, normal_map, cv::COLOR_RGBA2RGB);
+    Require(cv::checkRange(normal_map),
+            fmt::format("{}: the normal map holds NaN or infinite values", normal_path.string()));
+  }
+  if (displacement_path.empty() && normal_map.empty()) {
     head.surface = scan;
+    return head;
+  }
+  if (displacement_path.empty()) {  // a normal map alone: resample on the grid, flat
+    head.surface = BuildHiResSurface(GridLayoutOf(scan, options, options.grid_resolution, mesh_path), scan,
+                                     cv::Mat::zeros(options.grid_resolution, options.grid_resolution, CV_32F),
+                                     options.phong_alpha);
+    head.surface.N = NormalsFromNormalMap(head.surface, normal_map, options);
     return head;
   }
   cv::Mat disp = ReadImage(displacement_path, /*srgb=*/false);
@@ -203,14 +303,8 @@ ScannedHead LoadScannedHead(const std::filesystem::path& mesh_path, const std::f
           fmt::format("{}: displacement maps must be square ({}x{})", displacement_path.string(), disp.cols, disp.rows));
   Require(cv::checkRange(disp), fmt::format("{}: the displacement map holds NaN or infinite values", displacement_path.string()));
   disp = (disp - options.displacement_midlevel) * options.displacement_scale_mm;
-  // Resample on a UV grid the way the studio builds its actors: the scan is a rig without blendshapes.
-  FaceRig as_rig;
-  as_rig.neutral = scan;
-  as_rig.neutral.N.resize(0, 3);
-  const HiResLayout layout = BuildHiResLayout(as_rig, options.grid_resolution, disp.rows);
-  Require(layout.num_vertices() > 0,
-          fmt::format("{}: no triangle of the UV layout lies inside [0,1]²", mesh_path.string()));
-  head.surface = BuildHiResSurface(layout, scan, disp, options.phong_alpha);
+  head.surface = BuildHiResSurface(GridLayoutOf(scan, options, disp.rows, mesh_path), scan, disp, options.phong_alpha);
+  if (!normal_map.empty()) head.surface.N = NormalsFromNormalMap(head.surface, normal_map, options);
   return head;
 }
 

@@ -16,8 +16,18 @@
 // primitives of all meshes are read and node transforms are ignored (scans are
 // usually one mesh at the origin).
 //
-// Differences from a full importer: normal maps are not read; the scan is static (no
-// blendshapes), so it can be relit, posed and rendered, not animated.
+// A normal map (RGB, n = 2·value − 1, read without sRGB decoding) sets the shading
+// normals: the scan is resampled on the grid as for a displacement map (a flat one if
+// none is given) and each grid vertex takes the map's normal at its UV. Tangent-space
+// maps (the default; OpenGL convention, green = +v of the file, i.e. up in the
+// image; `normal_map_green_down` for DirectX maps) are turned into the mesh frame with
+// the per-vertex tangent frame of the UV layout (T = ∂p/∂u, B from ∂p/∂v,
+// orthonormalised against the geometric normal); object-space maps are taken as they
+// are. The grid has one vertex per texel, so the map's detail is shaded at the grid's
+// resolution.
+//
+// Differences from a full importer: the scan is static (no blendshapes), so it can be
+// relit, posed and rendered, not animated.
 #pragma once
 
 #include <filesystem>
@@ -36,6 +46,8 @@ struct ScannedHeadOptions {
   double displacement_midlevel = 0.0;  // map value meaning "no displacement" (0.5 for 8-bit maps)
   int grid_resolution = 1024;          // resampling grid for displacement, texels per side
   double phong_alpha = 0.75;           // rounding of the scan's facets under the displacement
+  std::string normal_map_space = "tangent";  // tangent | object
+  bool normal_map_green_down = false;        // tangent space, DirectX convention (green = −v of the file)
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
@@ -48,10 +60,16 @@ struct ScannedHead {
 };
 
 // Errors name the file and the problem: a mesh without UVs, a texture that cannot be
-// read, a displacement map with several channels. `albedo` may be empty for a glTF
-// file whose material has a base colour texture.
+// read, a displacement map with several channels, a normal map without three channels
+// or with NaNs. `albedo` may be empty for a glTF file whose material has a base colour
+// texture; `displacement` and `normal_map` may be empty.
 ScannedHead LoadScannedHead(const std::filesystem::path& mesh, const std::filesystem::path& albedo,
-                            const std::filesystem::path& displacement, const ScannedHeadOptions& options);
+                            const std::filesystem::path& displacement, const ScannedHeadOptions& options,
+                            const std::filesystem::path& normal_map = {});
+
+// The shading normals a normal map gives `mesh` (with UVs, crease convention: v
+// downwards; normals computed when absent), per vertex, unit length; see above.
+MatX3d NormalsFromNormalMap(const TriMesh& mesh, const cv::Mat& normal_map, const ScannedHeadOptions& options);
 
 // The triangles of a glTF 2.0 file (mm) and, when `base_color` is given, its first
 // material's base colour texture (linear RGB float; empty when it has none).

@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstring>
+#include <numbers>
 #include <tiny_gltf.h>
 
 #include "core/image_io.h"
@@ -58,6 +60,57 @@ TEST(ScannedHead, ReproducesTheStudiosOwnActorSurface) {
   EXPECT_NE(ErrorOf([&] { LoadScannedHead(dir / "head.fbx", dir / "albedo.png", "", so); }).find("OBJ, PLY or glTF"),
             std::string::npos);
   EXPECT_NE(ErrorOf([&] { LoadScannedHead(dir / "head.obj", dir / "missing.png", "", so); }).find("missing.png"),
+            std::string::npos);
+}
+
+// A normal map sets the shading normals: on a plane (UV = (x, y) / 100 mm, normal +z)
+// a constant tangent-space normal tilted 30° towards +u (red) tilts every normal towards
+// +x; towards the file's +v (green, OpenGL) towards −y here (v grows downwards in
+// crease), +y for a DirectX map; an object-space map is taken as it is.
+TEST(ScannedHead, NormalMapSetsTheShadingNormals) {
+  const fs::path dir = TestDir();
+  TriMesh plane = MakeGrid(4, 4, 100.0, 100.0);
+  plane.N.resize(0, 3);
+  TriMesh file = plane;
+  file.UV.col(1) = (1.0 - file.UV.col(1).array()).matrix();  // OBJ: v up
+  WriteObj(dir / "plane.obj", file);
+  WriteImage(dir / "albedo.png", cv::Mat(8, 8, CV_32FC3, cv::Scalar(0.5, 0.4, 0.3)));
+  const double s = std::sin(30.0 * std::numbers::pi / 180.0), c = std::cos(30.0 * std::numbers::pi / 180.0);
+  auto write_map = [&](const std::string& name, double x, double y, double z) {
+    WriteImage(dir / name, cv::Mat(16, 16, CV_32FC3, cv::Scalar(0.5 * (x + 1), 0.5 * (y + 1), 0.5 * (z + 1))));
+  };
+  write_map("red.exr", s, 0, c);
+  write_map("green.exr", 0, s, c);
+  write_map("flat.exr", 0, 0, 1);
+  write_map("object.exr", 0, -1, 0);
+  ScannedHeadOptions so;
+  so.grid_resolution = 32;
+  auto normals = [&](const std::string& map, const ScannedHeadOptions& o) {
+    const ScannedHead h = LoadScannedHead(dir / "plane.obj", dir / "albedo.png", "", o, dir / map);
+    EXPECT_GT(h.surface.num_vertices(), 500);  // resampled on the 32² grid
+    EXPECT_EQ(h.surface.N.rows(), h.surface.num_vertices());
+    return h.surface.N;
+  };
+  auto expect_all = [](const MatX3d& N, const Eigen::Vector3d& want, const char* what) {
+    EXPECT_LT((N.rowwise() - want.transpose()).rowwise().norm().maxCoeff(), 1e-6) << what;
+  };
+  expect_all(normals("flat.exr", so), {0, 0, 1}, "flat");
+  expect_all(normals("red.exr", so), {s, 0, c}, "red");
+  expect_all(normals("green.exr", so), {0, -s, c}, "green, OpenGL");
+  ScannedHeadOptions dx = so;
+  dx.normal_map_green_down = true;
+  expect_all(normals("green.exr", dx), {0, s, c}, "green, DirectX");
+  ScannedHeadOptions object = so;
+  object.normal_map_space = "object";
+  expect_all(normals("object.exr", object), {0, -1, 0}, "object space");
+
+  // Errors name the file.
+  WriteImage(dir / "gray.exr", cv::Mat(16, 16, CV_32FC1, cv::Scalar(0.5)));
+  EXPECT_NE(ErrorOf([&] { LoadScannedHead(dir / "plane.obj", dir / "albedo.png", "", so, dir / "gray.exr"); })
+                .find("gray.exr: a normal map must have three channels"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { LoadScannedHead(dir / "plane.obj", dir / "albedo.png", "", so, dir / "none.exr"); })
+                .find("none.exr"),
             std::string::npos);
 }
 

@@ -234,8 +234,8 @@ void AddSynthDatasetCommands(CLI::App& app) {
 
   // synth render-scan
   {
-    auto* cmd = synth->add_subcommand("render-scan", "Relight a real scanned head (OBJ/PLY/glTF + albedo [+ displacement map])");
-    static std::string mesh, albedo, displacement, units = "mm", light = "studio", size, out;
+    auto* cmd = synth->add_subcommand("render-scan", "Relight a real scanned head (OBJ/PLY/glTF + albedo [+ displacement map] [+ normal map])");
+    static std::string mesh, albedo, displacement, normal_map, units = "mm", light = "studio", size, out;
     static ScannedHeadOptions so;
     static double yaw = 0, fov = 30;
     static int samples = 2;
@@ -244,6 +244,9 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_option("--albedo", albedo, "Colour texture in the mesh's UV layout (PNG, EXR, …); optional for glTF "
                                         "files with a base colour texture");
     cmd->add_option("--displacement", displacement, "Displacement map in the same UV layout (EXR, PNG)");
+    cmd->add_option("--normal-map", normal_map, "Normal map in the same UV layout (RGB; tangent space unless --normal-space object)");
+    cmd->add_option("--normal-space", so.normal_map_space, "Space of the normal map")->check(CLI::IsMember({"tangent", "object"}))->capture_default_str();
+    cmd->add_flag("--normal-green-down", so.normal_map_green_down, "Tangent-space map in the DirectX convention (green = −v)");
     cmd->add_option("--displacement-scale", so.displacement_scale_mm, "mm per unit of the displacement map")->capture_default_str();
     cmd->add_option("--midlevel", so.displacement_midlevel, "Map value of zero displacement (0.5 for 8-bit maps)")->capture_default_str();
     cmd->add_option("--grid", so.grid_resolution, "Resampling grid for the displacement, texels per side")->capture_default_str();
@@ -258,7 +261,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_option("--out,-o", out, "Output image (PNG)")->required();
     cmd->callback([] {
       so.units_to_mm = UnitsToMm(units);
-      const ScannedHead head = LoadScannedHead(mesh, albedo, displacement, so);
+      const ScannedHead head = LoadScannedHead(mesh, albedo, displacement, so, normal_map);
       StudioOptions studio;
       ParseSize(size, &studio);
       TriMesh m = head.surface;
@@ -267,7 +270,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
       const double r = yaw * std::numbers::pi / 180.0;
       const Eigen::Matrix3d R = Eigen::AngleAxisd(r, Eigen::Vector3d::UnitY()).toRotationMatrix();
       for (int v = 0; v < m.num_vertices(); ++v) m.V.row(v) = (R * (m.V.row(v).transpose() - centre) + centre).transpose();
-      m.N.resize(0, 3);
+      if (m.N.rows() == m.num_vertices()) m.N = m.N * R.transpose();  // the normal map's shading normals turn too
       const double radius = 0.5 * (hi - lo).norm();
       const CameraIntrinsics K = CameraIntrinsics::FromFov(fov, studio.width, studio.height);
       const double distance = radius / std::sin(0.5 * std::min(fov, fov * studio.height / studio.width) * std::numbers::pi / 180.0);
