@@ -1,6 +1,7 @@
 #include "synth/scanned_head.h"
 
 #include <cstring>
+#include <functional>
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
@@ -104,7 +105,41 @@ TriMesh ReadGltfMesh(const std::filesystem::path& path, cv::Mat* base_color) {
   std::vector<Eigen::Vector2d> UV;
   std::vector<Eigen::Vector3i> F;
   int material = -1;
-  for (const auto& mesh : model.meshes) {
+  // The mesh instances of the default scene (the first if none is marked) with their
+  // nodes' world transforms; every mesh once, untransformed, if the file has no scene.
+  std::vector<std::pair<int, Eigen::Affine3d>> instances;
+  const auto local = [](const tinygltf::Node& n) {
+    Eigen::Affine3d T = Eigen::Affine3d::Identity();
+    if (n.matrix.size() == 16) {
+      for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j) T.matrix()(i, j) = n.matrix[4 * j + i];  // column-major
+      return T;
+    }
+    if (n.translation.size() == 3) T.translate(Eigen::Vector3d(n.translation[0], n.translation[1], n.translation[2]));
+    if (n.rotation.size() == 4) T.rotate(Eigen::Quaterniond(n.rotation[3], n.rotation[0], n.rotation[1], n.rotation[2]).normalized());
+    if (n.scale.size() == 3) T.scale(Eigen::Vector3d(n.scale[0], n.scale[1], n.scale[2]));
+    return T;
+  };
+  const std::function<void(int, const Eigen::Affine3d&, size_t)> visit = [&](int index, const Eigen::Affine3d& parent,
+                                                                             size_t depth) {
+    Require(index >= 0 && index < static_cast<int>(model.nodes.size()) && depth <= model.nodes.size(),
+            fmt::format("{}: the scene refers to a missing node {} or its nodes form a cycle", what, index));
+    const tinygltf::Node& node = model.nodes[index];
+    const Eigen::Affine3d world = parent * local(node);
+    if (node.mesh >= 0) {
+      Require(node.mesh < static_cast<int>(model.meshes.size()), fmt::format("{}: node {} refers to a missing mesh", what, index));
+      instances.emplace_back(node.mesh, world);
+    }
+    for (int child : node.children) visit(child, world, depth + 1);
+  };
+  if (!model.scenes.empty()) {
+    const int scene = model.defaultScene >= 0 && model.defaultScene < static_cast<int>(model.scenes.size()) ? model.defaultScene : 0;
+    for (int root : model.scenes[scene].nodes) visit(root, Eigen::Affine3d::Identity(), 0);
+  } else {
+    for (int m = 0; m < static_cast<int>(model.meshes.size()); ++m) instances.emplace_back(m, Eigen::Affine3d::Identity());
+  }
+  for (const auto& [mesh_index, transform] : instances) {
+    const tinygltf::Mesh& mesh = model.meshes[mesh_index];
     for (const auto& prim : mesh.primitives) {
       if (prim.mode != TINYGLTF_MODE_TRIANGLES) continue;
       auto pos = prim.attributes.find("POSITION");
@@ -117,7 +152,7 @@ TriMesh ReadGltfMesh(const std::filesystem::path& path, cv::Mat* base_color) {
       Require(p.size() / 3 == t.size() / 2, fmt::format("{}: POSITION and TEXCOORD_0 differ in length", what));
       const int base = static_cast<int>(V.size());
       for (size_t i = 0; i < p.size() / 3; ++i) {
-        V.emplace_back(1000.0 * p[3 * i], 1000.0 * p[3 * i + 1], 1000.0 * p[3 * i + 2]);  // metres → mm
+        V.emplace_back(1000.0 * (transform * Eigen::Vector3d(p[3 * i], p[3 * i + 1], p[3 * i + 2])));  // metres → mm
         UV.emplace_back(t[2 * i], t[2 * i + 1]);  // glTF's v already grows downwards
       }
       const int n = static_cast<int>(p.size() / 3);

@@ -12,9 +12,10 @@
 // Without a displacement map the scan is rendered as it is.
 //
 // glTF: positions are metres by the standard (scaled by 1000, `units_to_mm` is not
-// used), UVs already have v downwards (`flip_v` is not used), all triangle
-// primitives of all meshes are read and node transforms are ignored (scans are
-// usually one mesh at the origin).
+// used), UVs already have v downwards (`flip_v` is not used), and the triangle
+// primitives of every mesh instance of the default scene are read, placed by their
+// nodes' transforms (matrix or translation-rotation-scale, composed down the node
+// tree); a file without a scene gives every mesh once, untransformed.
 //
 // A normal map (RGB, n = 2·value − 1, read without sRGB decoding) sets the shading
 // normals: the scan is resampled on the grid as for a displacement map (a flat one if

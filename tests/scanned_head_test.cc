@@ -206,6 +206,27 @@ TEST(ScannedHead, ReadsGltfWithItsBaseColourTexture) {
   const cv::Vec3f red = head.materials.albedo.at<cv::Vec3f>(1, 1);
   EXPECT_NEAR(red[0], 1.0f, 1e-6);
   EXPECT_NEAR(red[1], 0.0f, 1e-6);
+  // Node transforms place the mesh: a child node (scale 2, then +0.1 m in x) under a
+  // parent turned 90° about z.
+  tinygltf::Node parent;
+  parent.rotation = {0, 0, std::sin(std::numbers::pi / 4), std::cos(std::numbers::pi / 4)};  // x, y, z, w
+  parent.children = {0};
+  model.nodes[0].translation = {0.1, 0, 0};
+  model.nodes[0].scale = {2, 2, 2};
+  model.nodes.push_back(parent);
+  model.scenes[0].nodes = {1};
+  ASSERT_TRUE(writer.WriteGltfSceneToFile(&model, (dir / "placed.gltf").string(), true, true, true, false));
+  const ScannedHead placed = LoadScannedHead(dir / "placed.gltf", "", "", ScannedHeadOptions{});
+  ASSERT_EQ(placed.surface.num_vertices(), grid.num_vertices());
+  for (int v = 0; v < grid.num_vertices(); ++v) {
+    const Eigen::Vector3d q = 2.0 * grid.V.row(v).transpose() + Eigen::Vector3d(0.1, 0, 0);
+    const Eigen::Vector3d want = 1000.0 * Eigen::Vector3d(-q.y(), q.x(), q.z());  // 90° about z
+    EXPECT_LT((placed.surface.V.row(v).transpose() - want).norm(), 1e-3) << v;
+  }
+  model.nodes[0].scale.clear();
+  model.nodes[0].translation.clear();
+  model.nodes.pop_back();
+  model.scenes[0].nodes = {0};
   // A glTF without texture coordinates is refused by name.
   model.meshes[0].primitives[0].attributes.erase("TEXCOORD_0");
   ASSERT_TRUE(writer.WriteGltfSceneToFile(&model, (dir / "no_uv.gltf").string(), true, true, true, false));
