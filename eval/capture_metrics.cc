@@ -248,12 +248,19 @@ cv::Mat DrawErrorVectors(const cv::Mat& frame_rgb, const MatX2d& truth, const Ma
       cv::line(p, a, b, colour, 1, cv::LINE_AA);
       cv::circle(p, a, 1, cv::Scalar(255, 255, 255), cv::FILLED, cv::LINE_AA);
     }
-    cv::putText(p, label, cv::Point(6, 18), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+    // One line per '\n', so a label stays inside its panel.
+    int y = 18;
+    for (size_t start = 0; start <= label.size(); y += 18) {
+      const size_t end = std::min(label.find('\n', start), label.size());
+      cv::putText(p, label.substr(start, end - start), cv::Point(6, y), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+                  cv::Scalar(255, 255, 255), 1, cv::LINE_AA);
+      start = end + 1;
+    }
     return p;
   };
   cv::Mat out;
   cv::hconcat(panel(err_coarse, cv::Scalar(255, 80, 60),
-                    fmt::format("global tracker: {:.2f} px (vectors x{:g})", coarse_px, scale)),
+                    fmt::format("global tracker: {:.2f} px\n(vectors x{:g})", coarse_px, scale)),
               panel(err_refined, cv::Scalar(80, 255, 120), fmt::format("flow-refined: {:.2f} px", refined_px)), out);
   return out;
 }
