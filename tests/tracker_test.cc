@@ -130,6 +130,43 @@ class TruthSource final : public LandmarkSource {
   int frame_ = 0;
 };
 
+// Records what the tracker hands the source for the next frame.
+class RecordingSource final : public LandmarkSource {
+ public:
+  LandmarkResult Track(const cv::Mat& image) override { return truth_.Track(image); }
+  void Reset() override {}
+  void SetNextInitialisation(const MatX2d& shape) override { inits.push_back(shape); }
+  std::string name() const override { return "recording"; }
+  std::vector<MatX2d> inits;
+
+ private:
+  TruthSource truth_;
+};
+
+// DDE: with init_from_fit the next frame starts from the rig fit's projected
+// landmarks; without it the source is left alone.
+TEST(Tracker, PassesTheFittedLandmarksOnAsTheNextInitialisation) {
+  for (const bool init_from_fit : {true, false}) {
+    auto frames = OpenFrameSource(Talking());
+    TrackerOptions options;
+    options.init_from_fit = init_from_fit;
+    auto source = std::make_unique<RecordingSource>();
+    const RecordingSource* recording = source.get();
+    FaceTracker tracker(Rig(), frames->info().camera->intrinsics, std::move(source), options);
+    cv::Mat f;
+    for (int i = 0; i < 3 && frames->Next(&f); ++i) {
+      const TrackedFrame t = tracker.Track(f);
+      ASSERT_TRUE(t.tracked);
+      if (!init_from_fit) continue;
+      ASSERT_EQ(recording->inits.size(), static_cast<size_t>(i + 1));
+      const MatX2d& init = recording->inits.back();
+      ASSERT_EQ(init.rows(), 68);
+      EXPECT_LT((init - tracker.fitter().ProjectLandmarks(t.fit)).cwiseAbs().maxCoeff(), 1e-9);
+    }
+    if (!init_from_fit) EXPECT_TRUE(recording->inits.empty());
+  }
+}
+
 TEST(Tracker, FitsTheTruthLandmarksOfAStudioSequence) {
   int tracked = 0;
   const FrameTrackingError e = TrackTalking(std::make_unique<TruthSource>(), &tracked);

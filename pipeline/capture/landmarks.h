@@ -36,6 +36,9 @@ class LandmarkSource {
   virtual LandmarkResult Track(const cv::Mat& image) = 0;
   // Forgets the previous frame (next Track detects again).
   virtual void Reset() = 0;
+  // The shape the next frame starts from, when the source tracks from the previous
+  // frame (68×2 px): the tracker passes the rig fit's landmarks (DDE). Default: ignored.
+  virtual void SetNextInitialisation(const MatX2d& /*shape*/) {}
   virtual std::string name() const = 0;
 };
 

@@ -606,6 +606,10 @@ RegressorLandmarkSource::~RegressorLandmarkSource() = default;
 
 void RegressorLandmarkSource::Reset() { impl_->previous.resize(0, 2); }
 
+void RegressorLandmarkSource::SetNextInitialisation(const MatX2d& shape) {
+  if (impl_->previous.rows() == shape.rows() && shape.allFinite()) impl_->previous = shape;
+}
+
 const ShapeRegressor& RegressorLandmarkSource::regressor() const { return impl_->regressor; }
 
 bool RegressorLandmarkSource::IsLost(const MatX2d& shape, const cv::Size& image_size, const MatX2d* previous) const {

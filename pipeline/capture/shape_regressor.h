@@ -203,6 +203,7 @@ class RegressorLandmarkSource final : public LandmarkSource {
 
   LandmarkResult Track(const cv::Mat& image) override;
   void Reset() override;
+  void SetNextInitialisation(const MatX2d& shape) override;
   std::string name() const override { return "regressor"; }
 
   const ShapeRegressor& regressor() const;

@@ -15,6 +15,7 @@ void TrackerOptions::VisitFields(OptionVisitor& v) {
   v.Field("tracker_model", tracker_model);
   v.Field("min_confidence", min_confidence);
   v.Field("confidence_scale_iod", confidence_scale_iod);
+  v.Field("init_from_fit", init_from_fit);
   fit.VisitFields(v);
   dlib.VisitFields(v);
 }
@@ -71,7 +72,11 @@ TrackedFrame FaceTracker::Track(const cv::Mat& frame) {
   const double s = options_.confidence_scale_iod * std::max(iod, 1.0);
   out.confidence = std::exp(-0.5 * (out.fit.rms_px / s) * (out.fit.rms_px / s));
   out.tracked = out.confidence >= options_.min_confidence;
-  if (!out.tracked) Reset();  // re-detect on the next frame
+  if (!out.tracked) {
+    Reset();  // re-detect on the next frame
+  } else if (options_.init_from_fit) {
+    source_->SetNextInitialisation(fitter_.ProjectLandmarks(out.fit));
+  }
   return out;
 }
 

@@ -38,6 +38,10 @@ struct TrackerOptions {
   // σ of the confidence, as a fraction of the inter-ocular distance:
   // confidence = exp(−½ (rms / (σ · IOD))²), rms the fit's landmark residual.
   double confidence_scale_iod = 0.1;
+  // Start the landmark regressor on the next frame from the rig fit's projected
+  // landmarks rather than its own output (as DDE starts from the fitted model), so
+  // its per-landmark errors do not accumulate from frame to frame. dlib ignores it.
+  bool init_from_fit = true;
   LandmarkFitOptions fit;
   DlibLandmarkOptions dlib;
 
