@@ -95,7 +95,8 @@ void ValidateAs(const json& j, const std::string& what) {
 // A section's options at their defaults, as JSON.
 template <class Options>
 json DefaultsOf() {
-  return json::parse(OptionsToJson(Options()));
+  static const json defaults = json::parse(OptionsToJson(Options()));  // once per section type
+  return defaults;
 }
 
 struct SectionInfo {

@@ -15,6 +15,7 @@
 #include "core/mesh_io.h"
 #include "core/mesh_ops.h"
 #include "synth/hires_surface.h"
+#include "synth/wrinkles.h"
 
 namespace crease {
 
@@ -233,24 +234,10 @@ MatX3d NormalsFromNormalMap(const TriMesh& mesh, const cv::Mat& normal_map, cons
       }
     }
   }
-  const int W = normal_map.cols, H = normal_map.rows;
   MatX3d out(nv, 3);
   for (int i = 0; i < nv; ++i) {
-    // Bilinear at the UV (texel centres at (k + 0.5) / size, v downwards like the rows).
-    const double x = std::clamp(mesh.UV(i, 0) * W - 0.5, 0.0, W - 1.0);
-    const double y = std::clamp(mesh.UV(i, 1) * H - 0.5, 0.0, H - 1.0);
-    const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-    const int x1 = std::min(x0 + 1, W - 1), y1 = std::min(y0 + 1, H - 1);
-    const double fx = x - x0, fy = y - y0;
-    Eigen::Vector3d m = Eigen::Vector3d::Zero();
-    const auto add = [&](int yy, int xx, double w) {
-      const cv::Vec3f& p = normal_map.at<cv::Vec3f>(yy, xx);
-      m += w * Eigen::Vector3d(2.0 * p[0] - 1.0, 2.0 * p[1] - 1.0, 2.0 * p[2] - 1.0);
-    };
-    add(y0, x0, (1 - fx) * (1 - fy));
-    add(y0, x1, fx * (1 - fy));
-    add(y1, x0, (1 - fx) * fy);
-    add(y1, x1, fx * fy);
+    // Bilinear at the UV (DESIGN.md texel convention), decoded n = 2·value − 1.
+    const Eigen::Vector3d m = 2.0 * SampleMetric(normal_map, mesh.UV(i, 0), mesh.UV(i, 1)) - Eigen::Vector3d::Ones();
     const Eigen::Vector3d n = N.row(i).transpose();
     Eigen::Vector3d s;
     if (options.normal_map_space == "object") {

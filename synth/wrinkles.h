@@ -191,7 +191,7 @@ class WrinkleField {
   std::vector<WrinkleSample> samples_;
 };
 
-// Bilinear lookup of a CV_32FC3 metric map at UV (texel convention of DESIGN.md,
+// Bilinear lookup of a CV_32FC3 map (a metric map, a normal map) at UV (texel convention of DESIGN.md,
 // clamped at the border).
 Eigen::Vector3d SampleMetric(const cv::Mat& metric, double u, double v);
 
