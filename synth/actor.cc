@@ -7,11 +7,13 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
 #include "core/file_util.h"
 #include "core/json_io.h"
 #include "core/mesh_ops.h"
+#include "core/uv_raster.h"
 
 namespace crease {
 
@@ -91,6 +93,25 @@ Actor GenerateActor(const FaceRig& rig, uint64_t seed, const ActorOptions& optio
   actor.mesoscopic.fine_line_depth_mm *= options.mesoscopic_scale;
   actor.skin = GenerateSkinParams(skin_rng);
   return actor;
+}
+
+cv::Mat ChartRimFade(const FaceRig& rig, int size, double mm_per_uv, double width_mm) {
+  TriMesh chart;
+  chart.V = rig.neutral.V;
+  chart.UV = rig.neutral.UV;
+  chart.F = FaceChartTriangles(rig);
+  const cv::Mat covered = CoverageMask(RasterizeUv(chart, size, size, "ChartRimFade: the rig's face chart"));
+  cv::Mat texels;
+  cv::distanceTransform(covered, texels, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+  cv::Mat fade(size, size, CV_32F);
+  const double mm_per_texel = mm_per_uv / size;
+  for (int j = 0; j < size; ++j) {
+    for (int i = 0; i < size; ++i) {
+      const double t = std::clamp(texels.at<float>(j, i) * mm_per_texel / width_mm, 0.0, 1.0);
+      fade.at<float>(j, i) = static_cast<float>(t * t * (3.0 - 2.0 * t));
+    }
+  }
+  return fade;
 }
 
 cv::Mat BuildStaticShapeMap(const FaceAnchors& anchors, const StaticShapeParams& params, int size) {
@@ -357,6 +378,7 @@ ActorModel::ActorModel(const FaceRig& rig, const Actor& actor) : rig_(rig), acto
   }
   wrinkles_ = std::make_unique<WrinkleField>(actor_.wrinkles, R, anchors_.mm_per_uv, weights, neutral_metric_);
   static_ = BuildStaticShapeMap(anchors_, actor_.static_shape, R);
+  static_ = static_.mul(ChartRimFade(rig_, R, anchors_.mm_per_uv, kStaticShapeRimFadeMm));
   meso_ = BuildMesoscopicMap(rig_, anchors_, actor_.mesoscopic, R);
   skin_ = BuildSkinMaps(rig_, anchors_, actor_.skin, R);
 }

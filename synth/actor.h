@@ -103,8 +103,16 @@ Actor ActorFromJson(const std::string& text, const std::string& what);
 void WriteActor(const std::filesystem::path& path, const Actor& actor);  // atomic
 Actor ReadActor(const std::filesystem::path& path);
 
-// Person-specific static shape S, CV_32F size², mm.
+// Person-specific static shape S, CV_32F size², mm. ActorModel multiplies it by
+// ChartRimFade(…, kStaticShapeRimFadeMm), so the face meets the rest of the head
+// (which carries no displacement) without a step at the seam.
 cv::Mat BuildStaticShapeMap(const FaceAnchors& anchors, const StaticShapeParams& params, int size);
+
+// CV_32F size² weight in the rig's UV layout: 0 on and outside the face chart's
+// rim, rising smoothly (smoothstep) to 1 at `width_mm` inside it (UV distance ×
+// mm_per_uv).
+cv::Mat ChartRimFade(const FaceRig& rig, int size, double mm_per_uv, double width_mm);
+inline constexpr double kStaticShapeRimFadeMm = 10.0;
 
 // Ground truth of one frame, per layer.
 struct ActorFrame {

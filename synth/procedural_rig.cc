@@ -37,6 +37,12 @@
 //   7. Wrinkle-relevant compression comes from the displacement fields' gradients
 //      (e.g. browInnerUp lifts the brows more than the hairline, so the forehead
 //      shortens vertically); the magnitudes are plausible, not measured.
+//   8. The rays of the latitude–longitude grid meet the sides of the nose and the
+//      alae at grazing angles, so there one cell spans a wall of up to 15 mm: the
+//      nose is terraced and casts blocky shadows under a raking light. (Sliding the
+//      nodes along the skin towards even 3D spacing was tried: a tangential
+//      Laplacian depletes the nose's front, and per-row redistribution of the
+//      azimuths shears the cells into visible striations on the nose's sides.)
 #include "synth/procedural_rig.h"
 
 #include <algorithm>
@@ -163,8 +169,11 @@ double HeadSdf(const Vector3d& p) {
   d = SMin(d, SdCone(q, {0, 4, 86}, {0, -40, 104}, 4.5, 7.5), 6);       // nasal dorsum and tip
   d = SMin(d, SdEllipsoid(q, {13, -47, 85}, {8, 6.5, 8}), 5);           // ala
   d = SMin(d, SdCone(q, {0, -42, 103}, {0, -54, 88}, 4.5, 3.5), 3);     // columella
-  d = SMin(d, SdEllipsoid(q, {0, -70, 80}, {22, 6.5, 8}), 6);           // upper lip
-  d = SMin(d, SdEllipsoid(q, {0, -83, 78}, {19, 6.5, 8}), 6);           // lower lip
+  // Lips, bent back around the dental arch (radius 40 mm at the front) instead of
+  // flat-fronted ellipsoids whose square ends looked boxy from the side.
+  const Vector3d q_arch(q.x(), q.y(), q.z() + q.x() * q.x() / 80.0);
+  d = SMin(d, SdEllipsoid(q_arch, {0, -70, 80}, {22, 6.5, 8}), 6);      // upper lip
+  d = SMin(d, SdEllipsoid(q_arch, {0, -83, 78}, {19, 6.5, 8}), 6);      // lower lip
   // Neck, widening towards the shoulders and cut flat like a bust at y = −165.
   d = SMin(d, SMax(SdCone(q, {0, -105, -24}, {0, -200, -32}, 50, 62), -(q.y() + 165.0), 10), 14);
   return d;

@@ -1,8 +1,11 @@
 #include "synth/studio.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <limits>
 #include <numbers>
+#include <set>
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
 
@@ -63,7 +66,18 @@ void StudioOptions::Check() const {
 
 namespace {
 
+// The underlay lies kUnderlayDepthMm inside the face, except near the face part's
+// rim (the seam with the cranium, neck, hair or ears): there its depth is
+// kUnderlayRimDepthMm plus kUnderlayDepthSlope × the distance from the rim (along
+// the mesh's edges), so the texel-wide gap between the hi-res grid's stair-stepped
+// edge and the rim shows skin almost on the surface, not a dark slit 3 mm deep
+// (which showed along the jaw and temples when the head turns). The actor's static
+// shape fades out towards the rim (synth/actor.cc), so the hi-res face stays
+// outside the shallow underlay there.
 constexpr double kUnderlayDepthMm = 3.0;
+constexpr double kUnderlayRimDepthMm = 0.05;
+constexpr double kUnderlayDepthSlope = 0.3;  // mm of depth per mm from the rim
+constexpr double kSkinRimBlendMm = 8.0;      // the face's skin maps blend into the parts' material
 
 // Material of a rig part, by its name.
 Material PartMaterial(const std::string& name, const Eigen::Vector3f& skin_tone) {
@@ -103,6 +117,7 @@ struct Studio::Scene {
   int hires_vertices = 0;
   int face_part = -1;                 // the rig's face part (-1: every vertex is face)
   std::vector<int> underlay_source;   // rig vertex of each underlay vertex
+  std::vector<double> underlay_depth; // its depth inside the face, mm
   int occluder_first = -1;            // first occluder vertex (-1: none)
   TriMesh occluder_unit;              // unit sphere
   std::unique_ptr<Renderer> renderer;
@@ -158,6 +173,41 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
       faces.emplace_back(t + Eigen::Vector3i::Constant(s.hires_vertices));
     }
   }
+  // The rim: face vertices that also belong to a non-face triangle, or that sit
+  // exactly where a non-face vertex sits (rigs, like crease's procedural head, may
+  // give the face its own copies of the seam's vertices).
+  std::vector<uint8_t> rim(nr, 0);
+  std::set<std::array<double, 3>> seam;
+  for (int f = 0; f < rig.neutral.num_faces(); ++f) {
+    const Eigen::Vector3i t = rig.neutral.F.row(f).transpose();
+    if (!(is_face(t[0]) && is_face(t[1]) && is_face(t[2]))) {
+      for (int k = 0; k < 3; ++k) {
+        rim[t[k]] = 1;
+        seam.insert({rig.neutral.V(t[k], 0), rig.neutral.V(t[k], 1), rig.neutral.V(t[k], 2)});
+      }
+    }
+  }
+  for (int v = 0; v < nr; ++v) {
+    if (seam.count({rig.neutral.V(v, 0), rig.neutral.V(v, 1), rig.neutral.V(v, 2)})) rim[v] = 1;
+  }
+  // Distance from the rim over the face triangles' edges (Dijkstra, neutral lengths).
+  TriMesh face_mesh;
+  face_mesh.V = rig.neutral.V;
+  face_mesh.F.resize(static_cast<Eigen::Index>(underlay_faces.size()), 3);
+  for (size_t f = 0; f < underlay_faces.size(); ++f) {
+    for (int k = 0; k < 3; ++k) face_mesh.F(static_cast<Eigen::Index>(f), k) = s.underlay_source[underlay_faces[f][k]];
+  }
+  std::vector<int> rim_vertices;
+  for (int v = 0; v < nr; ++v) {
+    if (rim[v] && is_face(v)) rim_vertices.push_back(v);
+  }
+  // (A rig that is all face has no seam: the underlay stays deep everywhere.)
+  const Eigen::VectorXd rim_distance = rim_vertices.empty()
+                                           ? Eigen::VectorXd::Constant(nr, std::numeric_limits<double>::infinity())
+                                           : DijkstraDistance(face_mesh, rim_vertices);
+  for (int v : s.underlay_source) {
+    s.underlay_depth.push_back(std::min(kUnderlayDepthMm, kUnderlayRimDepthMm + kUnderlayDepthSlope * rim_distance[v]));
+  }
   const int underlay_first = s.hires_vertices + nr;
   for (const auto& u : underlay_faces) faces.emplace_back(u + Eigen::Vector3i::Constant(underlay_first));
   const int nu = static_cast<int>(s.underlay_source.size());
@@ -182,7 +232,7 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
   // Materials: part 0 = textured skin (hi-res face, underlay, the rig's face part),
   // 1 + p = rig part p, last = occluder.
   SceneMaterials materials;
-  materials.albedo = model_->skin().albedo;
+  materials.albedo = model_->skin().albedo.clone();  // blended towards the seam below
   // The actor's skin maps are in physical terms (synth/skin.h): a specular weight
   // with 1 = nominal skin, and GGX α. The renderer takes the specular intensity ρ_s
   // in [0, 1] (nominal skin 0.5, MaterialPreset("skin")) and the perceptual
@@ -199,6 +249,27 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
   const cv::Scalar mean_albedo = cv::mean(materials.albedo, red > 0);
   const Eigen::Vector3f skin_tone(static_cast<float>(mean_albedo[0]), static_cast<float>(mean_albedo[1]),
                                   static_cast<float>(mean_albedo[2]));
+  {
+    // Towards the seam the face's maps blend into the uniform material of the parts
+    // it meets (the mean albedo, the nominal specular and roughness), so the seam
+    // shows no change of colour or sheen.
+    const int size = materials.albedo.rows;
+    const cv::Mat fade = ChartRimFade(rig, size, model_->anchors().mm_per_uv, kSkinRimBlendMm);
+    const float nominal_roughness = MaterialPreset("skin").roughness;
+    for (int j = 0; j < size; ++j) {
+      for (int i = 0; i < size; ++i) {
+        const float w = fade.at<float>(j, i);
+        if (w >= 1.0f) continue;
+        cv::Vec3f& a = materials.albedo.at<cv::Vec3f>(j, i);
+        if (a[0] <= 0.0f) continue;  // outside the chart
+        for (int k = 0; k < 3; ++k) a[k] = w * a[k] + (1.0f - w) * skin_tone[k];
+        float& sp = materials.specular.at<float>(j, i);
+        sp = w * sp + (1.0f - w) * nominal_specular;
+        float& ro = materials.roughness.at<float>(j, i);
+        ro = w * ro + (1.0f - w) * nominal_roughness;
+      }
+    }
+  }
   Material face = MaterialPreset("skin");
   face.textured = true;
   materials.part_materials.push_back(face);
@@ -257,7 +328,7 @@ MatX3d Studio::SceneVertices(const ActorFrame& frame, const SequenceFrame& f, co
   const MatX3d& N = frame.coarse.N;
   for (int i = 0; i < nu; ++i) {
     const int v = s.underlay_source[i];
-    V.row(s.hires_vertices + nr + i) = frame.coarse.V.row(v) - kUnderlayDepthMm * N.row(v);
+    V.row(s.hires_vertices + nr + i) = frame.coarse.V.row(v) - s.underlay_depth[i] * N.row(v);
   }
   const Eigen::Matrix3d R = world_from_head.rotation.toRotationMatrix();
   const int posed = s.hires_vertices + nr + nu;

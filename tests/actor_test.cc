@@ -16,6 +16,7 @@
 #include "core/mesh_ops.h"
 #include "core/preview_render.h"
 #include "core/rig_import.h"
+#include "core/uv_raster.h"
 #include "synth/procedural_rig.h"
 #include "tests/test_util.h"
 
@@ -301,6 +302,46 @@ TEST(Actor, ProceduralRigActor) {
   EXPECT_LT(cv::norm(neutral.expression_displacement, cv::NORM_INF), 1e-9);
   EXPECT_GT(SumAbsOverFamily(model, raised.expression_displacement, WrinkleFamily::kForehead), 1.0);
   CheckHiResAgainstMaps(model, raised);
+}
+
+TEST(Actor, StaticShapeFadesOutAtTheFaceChartRim) {
+  // The face meets the cranium (no displacement) without a step: S × ChartRimFade.
+  const FaceRig rig = BuildProceduralRig();
+  constexpr int kSize = 256;
+  ActorOptions opt = TestOptions(kSize);
+  opt.surface_min_vertices = 0;
+  const ActorModel model(rig, GenerateActor(rig, 5, opt));
+  const cv::Mat fade = ChartRimFade(rig, kSize, model.anchors().mm_per_uv, kStaticShapeRimFadeMm);
+  TriMesh chart = rig.neutral;
+  chart.F = FaceChartTriangles(rig);
+  const UvRaster raster = RasterizeUv(chart, kSize, kSize);
+  const cv::Mat S = model.Frame(Eigen::VectorXd()).static_displacement;
+  int rim = 0, inside = 0;
+  double rim_max = 0.0, inside_sq = 0.0;
+  for (int j = 0; j < kSize; ++j) {
+    for (int i = 0; i < kSize; ++i) {
+      const float w = fade.at<float>(j, i);
+      ASSERT_GE(w, 0.0f);
+      ASSERT_LE(w, 1.0f);
+      if (!raster.covered(i, j)) {
+        EXPECT_EQ(w, 0.0f);
+        continue;
+      }
+      const double s = S.at<float>(j, i);
+      if (w < 0.05f) {
+        ++rim;
+        rim_max = std::max(rim_max, std::abs(s));
+      } else if (w == 1.0f) {
+        ++inside;
+        inside_sq += s * s;
+      }
+    }
+  }
+  ASSERT_GT(rim, 100);
+  ASSERT_GT(inside, raster.num_covered() / 2);  // 10 mm is a thin band of the face
+  const double inside_rms = std::sqrt(inside_sq / inside);
+  EXPECT_GT(inside_rms, 0.3 * model.actor().static_shape.rms_mm);
+  EXPECT_LT(rim_max, 0.05 * inside_rms * 3.0 + 1e-6);  // ≤ 5 % of the ±3 RMS clamp
 }
 
 TEST(Actor, JsonRoundTripRebuildsIdentically) {
