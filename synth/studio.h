@@ -9,8 +9,11 @@
 //     static shape, wrinkles and pores), textured with the actor's skin maps;
 //   * the rig's other parts (cranium, ears, neck, eyes, mouth cavity, hair, …)
 //     at the same identity and expression, with per-part materials;
-//   * an underlay: the rig's face part pushed 3 mm inwards, hiding sub-texel
-//     cracks between the resampled face and the rest of the head;
+//   * an underlay: the rig's face part pushed 3 mm inwards (less within 10 mm of
+//     the seam with the rest of the head, down to 0.05 mm at it), hiding the
+//     texel-wide cracks between the resampled face and the rest of the head; the
+//     face's static shape and skin maps fade into the parts' uniform material
+//     towards that seam, so it shows no step, slit or change of colour;
 //   * optionally an occluder (a sphere) that sequences move in front of the face.
 // The head is posed (yaw, pitch, roll about the head centre, then translated);
 // camera and lights stay fixed in the world (lights attached to the camera).
