@@ -26,6 +26,7 @@
 #include "core/face_rig.h"
 #include "core/options.h"
 #include "core/types.h"
+#include "pipeline/capture/landmarks.h"
 #include "pipeline/capture/shape_regressor.h"
 
 namespace crease {
@@ -74,8 +75,37 @@ struct LabelledFace {
 std::vector<LabelledFace> RenderLabelledFaces(const FaceRig& rig, const std::vector<uint64_t>& actor_seeds,
                                               const TrackerTrainingOptions& options);
 // Folder I/O (format in the file comment). Reading sorts by name; errors name the file.
+// ReadLabelledFaces also takes a dlib XML file (ReadDlibXmlFaces, default options).
 void WriteLabelledFaces(const std::filesystem::path& folder, const std::vector<LabelledFace>& faces);
 std::vector<LabelledFace> ReadLabelledFaces(const std::filesystem::path& folder);
+
+// dlib's imglab XML: the format of dlib's release of iBUG 300-W
+// (labels_ibug_300W_train.xml, …) and of its example faces:
+//   <image file='F'> <box top='' left='' width='' height=''> <part name='00' x='' y=''/> … </box> … </image>
+// Image paths are relative to the XML's folder. Every box with the 68 parts (names
+// 00 … 67, any order) becomes one LabelledFace, named after the image and the box:
+// a square crop centred on the box, `crop_scale` times the box's larger side,
+// resampled (bilinear; black outside the image) so that the box's larger side is
+// `box_px` pixels — real photographs hold faces of any size and several per image,
+// the regressor and the detector are run on one face of a known scale. Boxes marked
+// ignore='1' or without 68 parts are skipped. Errors name the file and line.
+struct DlibXmlOptions {
+  double crop_scale = 2.5;
+  int box_px = 100;
+};
+std::vector<LabelledFace> ReadDlibXmlFaces(const std::filesystem::path& xml, const DlibXmlOptions& options = {});
+
+// A landmark source from a cold start on each face (Reset, then Track: the
+// detector, then the landmarks): detection rate, mean point-to-point error over the
+// 68 points on the faces it found (px and / inter-ocular distance, the outer eye
+// corners), and the time per face.
+struct LandmarkSourceEvaluation {
+  std::string source;
+  int faces = 0, found = 0;
+  double error_px = 0, error_iod = 0;
+  double ms_per_face = 0;
+};
+LandmarkSourceEvaluation EvaluateLandmarkSource(LandmarkSource& source, const std::vector<LabelledFace>& faces);
 
 struct LandmarkErrorStats {
   int frames = 0;

@@ -6,6 +6,8 @@
 #include <fstream>
 #include <numbers>
 
+#include <fmt/format.h>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <tbb/global_control.h>
 
@@ -182,6 +184,69 @@ TEST(ShapeRegressor, LabelledFaceFolderRoundTrip) {
   }
   testing::WriteText(dir / "face1.pts", "version: 1\nn_points: 68\n{\n1 2\n}\n");
   EXPECT_NE(ErrorOf([&] { ReadLabelledFaces(dir); }).find("face1.pts: point 2"), std::string::npos);
+}
+
+// dlib's imglab XML (its 300-W release and example faces): each labelled box becomes
+// a crop of known scale whose pixels and landmarks agree; ignored and incomplete
+// boxes are skipped; errors name the file and line.
+TEST(ShapeRegressor, DlibXmlFacesAreCroppedAroundTheirBoxes) {
+  const auto dir = TestDir();
+  // A 300×200 image with a bright dot at every part of a face in the box
+  // (left 100, top 50, 80×80): a ring of 68 points.
+  cv::Mat image(200, 300, CV_8UC3, cv::Scalar::all(0));
+  std::string parts;
+  MatX2d truth(68, 2);
+  for (int k = 0; k < 68; ++k) {
+    const double a = 2.0 * std::numbers::pi * k / 68.0;
+    const int x = static_cast<int>(std::lround(140 + 30 * std::cos(a))), y = static_cast<int>(std::lround(90 + 30 * std::sin(a)));
+    truth.row(k) << x, y;
+    image.at<cv::Vec3b>(y, x) = cv::Vec3b(255, 255, 255);
+    parts += fmt::format("      <part name='{:02d}' x='{}' y='{}'/>\n", k, x, y);
+  }
+  cv::Mat bgr;
+  cv::cvtColor(image, bgr, cv::COLOR_RGB2BGR);
+  ASSERT_TRUE(cv::imwrite((dir / "photo.png").string(), bgr));
+  const std::string xml = "<?xml version='1.0'?>\n<!-- labels -->\n<dataset><images>\n"
+                          "  <image file='photo.png'>\n"
+                          "    <box top='50' left='100' width='80' height='80'>\n" + parts +
+                          "    </box>\n"
+                          "    <box top='0' left='0' width='20' height='20' ignore='1'>\n" + parts +
+                          "    </box>\n"
+                          "    <box top='0' left='200' width='20' height='20'>\n"
+                          "      <part name='00' x='205' y='5'/>\n"
+                          "    </box>\n"
+                          "  </image>\n</images></dataset>\n";
+  testing::WriteText(dir / "labels.xml", xml);
+  const std::vector<LabelledFace> faces = ReadDlibXmlFaces(dir / "labels.xml", {.crop_scale = 2.0, .box_px = 40});
+  ASSERT_EQ(faces.size(), 1u);
+  const LabelledFace& f = faces[0];
+  EXPECT_EQ(f.name, "photo_0");
+  ASSERT_EQ(f.image.cols, 80);
+  ASSERT_EQ(f.image.rows, 80);
+  // Scale 40 / 80 about the box centre (139.5, 89.5) → the crop centre (39.5, 39.5).
+  for (int k = 0; k < 68; ++k) {
+    EXPECT_NEAR(f.landmarks(k, 0), 0.5 * (truth(k, 0) - 139.5) + 39.5, 1e-9);
+    EXPECT_NEAR(f.landmarks(k, 1), 0.5 * (truth(k, 1) - 89.5) + 39.5, 1e-9);
+    // The dot is at the landmark: the crop is brighter there than at the centre.
+    const int x = static_cast<int>(std::lround(f.landmarks(k, 0))), y = static_cast<int>(std::lround(f.landmarks(k, 1)));
+    EXPECT_GT(f.image.at<cv::Vec3b>(y, x)[0], 20) << k;
+  }
+  EXPECT_EQ(f.image.at<cv::Vec3b>(40, 40)[0], 0);
+  // ReadLabelledFaces takes the XML too (train-tracker --data, eval-landmarks --data).
+  EXPECT_EQ(ReadLabelledFaces(dir / "labels.xml").size(), 1u);
+  // Errors name the file, the line and the problem.
+  testing::WriteText(dir / "bad.xml", "<dataset>\n<image file='photo.png'>\n<box top='x' left='0' width='9' height='9'>\n" +
+                                          parts + "</box></image></dataset>\n");
+  EXPECT_NE(ErrorOf([&] { ReadDlibXmlFaces(dir / "bad.xml"); }).find("bad.xml:3: <box> top='x' is not a number"),
+            std::string::npos);
+  testing::WriteText(dir / "missing.xml", "<image file='nowhere.jpg'><box top='0' left='0' width='9' height='9'>" +
+                                              parts + "</box></image>");
+  EXPECT_NE(ErrorOf([&] { ReadDlibXmlFaces(dir / "missing.xml"); }).find("image 'nowhere.jpg' not found"),
+            std::string::npos);
+  testing::WriteText(dir / "empty.xml", "<dataset><images></images></dataset>");
+  EXPECT_NE(ErrorOf([&] { ReadDlibXmlFaces(dir / "empty.xml"); }).find("no <box> with the 68 <part>s"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { ReadDlibXmlFaces(dir / "none.xml"); }).find("none.xml: cannot open"), std::string::npos);
 }
 
 // The test: trained on a small set of studio renders, the regressor

@@ -6,13 +6,17 @@
 #include <cstdio>
 #include <filesystem>
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 
 #include "apps/crease/commands.h"
 #include "core/error.h"
 #include "core/face_rig.h"
 #include "core/file_util.h"
 #include "core/options.h"
+#include "core/json_io.h"
 #include "eval/tracker_training.h"
+#include "pipeline/capture/landmarks.h"
+#include "pipeline/capture/shape_regressor.h"
 
 namespace crease::app {
 namespace fs = std::filesystem;
@@ -83,6 +87,72 @@ void AddTrainTrackerCommand(CLI::App& app) {
     WriteFileAtomic(report_path, [&](std::ostream& o) { o << result.report.ToJson() << "\n"; });
     std::printf("%s", result.report.ToText().c_str());
     std::printf("wrote %s and %s\n", out.c_str(), report_path.string().c_str());
+  });
+}
+
+void AddEvalLandmarksCommand(CLI::App& app) {
+  auto* cmd = app.add_subcommand(
+      "eval-landmarks",
+      "Landmark error of dlib and/or a trained regressor on labelled faces (real photographs or renders)");
+  static std::string data, tracker, json_path, save_crops;
+  static bool use_dlib = false;
+  static double crop_scale = 2.5;
+  static int box_px = 100;
+  static uint64_t seed = 1;
+  cmd->add_option("--data", data,
+                  "Labelled faces: a folder of NAME.png + NAME.pts (iBUG format) or a dlib XML file "
+                  "(imglab; dlib's 300-W release and example faces)")
+      ->required();
+  cmd->add_option("--tracker", tracker, "Regressor model (from `crease train-tracker`)");
+  cmd->add_flag("--dlib", use_dlib, "Also evaluate dlib's HOG detector + 68-point model");
+  cmd->add_option("--crop-scale", crop_scale, "XML: crop side over the box's larger side")->capture_default_str();
+  cmd->add_option("--box-px", box_px, "XML: the box's larger side in the crop, pixels")->capture_default_str();
+  cmd->add_option("--seed", seed, "Seed of the regressor's perturbed initialisations")->capture_default_str();
+  cmd->add_option("--save-crops", save_crops, "Also write the faces as read (NAME.png + NAME.pts) to this folder");
+  cmd->add_option("--json", json_path, "Write the results (JSON)");
+  cmd->callback([] {
+    Require(use_dlib || !tracker.empty(), "eval-landmarks: give --tracker T.ctrk and/or --dlib");
+    const fs::path path(data);
+    const std::vector<LabelledFace> faces = fs::is_regular_file(path) && path.extension() == ".xml"
+                                                ? ReadDlibXmlFaces(path, {crop_scale, box_px})
+                                                : ReadLabelledFaces(path);
+    std::printf("%zu labelled faces from %s\n", faces.size(), data.c_str());
+    if (!save_crops.empty()) WriteLabelledFaces(save_crops, faces);
+    nlohmann::json out;
+    out["data"] = data;
+    out["faces"] = faces.size();
+    auto report = [&](const LandmarkSourceEvaluation& e) {
+      std::printf("%-10s cold start (detector, then landmarks): found %d of %d faces; error %.3f IOD (%.2f px) on "
+                  "those; %.1f ms per face\n",
+                  e.source.c_str(), e.found, e.faces, e.error_iod, e.error_px, e.ms_per_face);
+      out[e.source] = {{"faces", e.faces},         {"found", e.found},          {"error_iod", e.error_iod},
+                       {"error_px", e.error_px}, {"ms_per_face", e.ms_per_face}};
+    };
+    if (use_dlib) {
+      DlibLandmarkSource dlib;
+      report(EvaluateLandmarkSource(dlib, faces));
+    }
+    if (!tracker.empty()) {
+      const ShapeRegressor regressor = LoadShapeRegressor(tracker);
+      RegressorLandmarkSource source(regressor);
+      report(EvaluateLandmarkSource(source, faces));
+      // Without the detector: from the truth under a random similarity (a tracker's
+      // previous frame) and from the mean shape in the truth's jittered box.
+      TrackerTrainingReport r;
+      EvaluateShapeRegressor(regressor, faces, seed, /*detector_frames=*/0, &r);
+      std::printf("regressor  from the perturbed truth: %.3f -> %.3f IOD (%.2f -> %.2f px); from a jittered box: "
+                  "%.3f -> %.3f IOD (%.2f -> %.2f px)\n",
+                  r.tracking.initial_iod, r.tracking.final_iod, r.tracking.initial_px, r.tracking.final_px,
+                  r.box.initial_iod, r.box.final_iod, r.box.initial_px, r.box.final_px);
+      out["regressor_tracking_init"] = {{"initial_iod", r.tracking.initial_iod}, {"final_iod", r.tracking.final_iod},
+                                        {"initial_px", r.tracking.initial_px}, {"final_px", r.tracking.final_px}};
+      out["regressor_box_init"] = {{"initial_iod", r.box.initial_iod}, {"final_iod", r.box.final_iod},
+                                   {"initial_px", r.box.initial_px}, {"final_px", r.box.final_px}};
+    }
+    if (!json_path.empty()) {
+      WriteJsonFile(json_path, out);
+      std::printf("wrote %s\n", json_path.c_str());
+    }
   });
 }
 

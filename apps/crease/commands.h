@@ -25,6 +25,8 @@ void AddTrainCommands(CLI::App& app);
 // track (issue 5: the global face tracker).
 void AddTrackCommand(CLI::App& app);
 void AddTrainTrackerCommand(CLI::App& app);
+// eval-landmarks: a landmark source against labelled faces (real photographs, renders).
+void AddEvalLandmarksCommand(CLI::App& app);
 // capture (Sec. 5: online capture) and eval (its metrics against ground truth), issue 6.
 void AddCaptureCommands(CLI::App& app);
 // experiment list|run (the runner, eval/experiment.h) and report (reports/), issue 7.

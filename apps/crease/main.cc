@@ -20,6 +20,7 @@ int main(int argc, char** argv) {
   crease::app::AddTrainCommands(app);
   crease::app::AddTrackCommand(app);
   crease::app::AddTrainTrackerCommand(app);
+  crease::app::AddEvalLandmarksCommand(app);
   crease::app::AddCaptureCommands(app);
   crease::app::AddExperimentCommands(app);
   try {
