@@ -225,12 +225,10 @@ struct Grid {
   }
   // Its upper edge is the hairline, receding less at the temples (lower there).
   static double TopPsi(double abs_phi) { return kFaceTopPsi - 12.0 * Smoothstep(35.0, kFaceHalfPhi, abs_phi); }
-  // Cell between rows r, r+1 and columns c, c+1 (not wrapping) belongs to the face.
-  bool FaceCell(int r, int c) const {
-    if (r < fr0 || r + 1 > fr1 || c < fc0 || c + 1 > fc1) return false;
-    const double a = std::max(std::abs(phi[c]), std::abs(phi[c + 1]));
-    return psi[r + 1] >= BottomPsi(a) - 1e-9 && psi[r] <= TopPsi(a) + 1e-9;
-  }
+  // Cell between rows r, r+1 and columns c, c+1 (not wrapping) belongs to the face:
+  // a block of rows and columns, whose top and bottom rows NodePsi bends onto the
+  // hairline and the jaw line.
+  bool FaceCell(int r, int c) const { return r >= fr0 && r + 1 <= fr1 && c >= fc0 && c + 1 <= fc1; }
   // All four cells around node (r, c) are face cells.
   bool InteriorFaceNode(int r, int c) const {
     return FaceCell(r - 1, c - 1) && FaceCell(r - 1, c) && FaceCell(r, c - 1) && FaceCell(r, c);
@@ -258,7 +256,7 @@ Grid MakeGrid(const ProceduralRigOptions& o) {
     if (scaled) n = std::max(1, static_cast<int>(std::lround(n * o.face_row_density)));
     for (int i = 1; i <= n; ++i) g.psi.push_back(from + (to - from) * i / n);
   };
-  band(90, kFaceTopPsi, 8, false);
+  band(90, kFaceTopPsi, 14, false);  // NodePsi spreads these over up to 112° at the back
   band(kFaceTopPsi, 12, 17, true);
   band(12, kEyePsi, 12, true);  // eye band: ~1° rows
   band(kEyePsi, -10, 10, true);
@@ -333,6 +331,36 @@ double HairlinePsi(double abs_phi) {
     }
   }
   return kPsi[5];
+}
+
+// Elevation of node (r, c), degrees: the row's ψ, bent so that the face's top row
+// (kFaceTopPsi at the midline) runs exactly along the hairline — over the face and on
+// round to the nape — and its bottom row (kFaceBottomPsi) along the jaw line, instead
+// of the face and the hair ending in staircases of whole cells (which showed as a
+// stepped hairline on every turned head, and as a row of wrinkle-map patches along
+// it). The bend is Δ(φ) · T(ψ), T a tent about the row: 35° each side of the top
+// row over the face, widening behind it (up to the pole, which stays, and down to
+// −38° at the back), and 25° above the jaw row (18° below it, which the bottom pole
+// bounds), so rows keep their order (|Δ| ≤ 0.8 × the tent's half-width); the eyes
+// and the mouth are where Δ is 0 or nearly. Cells on the back of the head, whose
+// rows the bend spreads, are coarser than the face's.
+double NodePsi(const Grid& g, int r, int c) {
+  const double psi = g.psi[r], a = std::abs(g.phi[c]);
+  double out = psi;
+  const double back = Smoothstep(kFaceHalfPhi, 180.0, a);
+  const double top_up = 35.0 + 13.0 * back;    // up to the pole at 90°
+  const double top_down = 35.0 + 45.0 * back;  // down to −38° at the back (hairline −22°: a bend of −64°)
+  const double d_top = std::clamp(HairlinePsi(a) - kFaceTopPsi, -0.8 * top_down, 0.0);
+  out += d_top * std::max(0.0, psi >= kFaceTopPsi ? 1.0 - (psi - kFaceTopPsi) / top_up
+                                                  : 1.0 - (kFaceTopPsi - psi) / top_down);
+  // The jaw line, fading out behind the face (no colour changes there).
+  constexpr double kBottomUp = 25.0, kBottomDown = 18.0;
+  const double d_bottom = (Grid::BottomPsi(std::min(a, kFaceHalfPhi)) - kFaceBottomPsi) *
+                          (1.0 - Smoothstep(kFaceHalfPhi, 110.0, a));
+  const double t = psi >= kFaceBottomPsi ? 1.0 - (psi - kFaceBottomPsi) / kBottomUp
+                                         : 1.0 - (kFaceBottomPsi - psi) / kBottomDown;
+  out += d_bottom * std::max(0.0, t);
+  return out;
 }
 
 // ---------------------------------------------------------------------------
@@ -456,7 +484,7 @@ struct HeadModel {
   double hair_mm = 0.0;
 
   Vector3d NodePosition(const VertexInfo& vi, const LidState& lids) const {
-    const double psi0 = grid.psi[vi.r], phi = grid.phi[vi.c];
+    const double psi0 = NodePsi(grid, vi.r, vi.c), phi = grid.phi[vi.c];
     double psi = psi0;
     if (vi.r > 0 && vi.r < grid.rows() - 1) psi += EyeWarp(psi0, phi, vi.eye_side, lids);
     const Vector3d dir = Direction(psi, phi);
@@ -646,7 +674,9 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
   auto node = [&](int r, int c) { return static_cast<size_t>(r) * C + c; };
   // Hair above the hairline; the rest of the scalp is split into cranium and neck
   // once positions are known.
-  auto skull_part = [&](int r, int c) { return g.psi[r] >= HairlinePsi(std::abs(g.phi[c])) ? kHair : kCranium; };
+  auto skull_part = [&](int r, int c) {
+    return NodePsi(g, r, c) >= HairlinePsi(std::abs(g.phi[c])) - 1e-9 ? kHair : kCranium;
+  };
   auto vertex = [&](int r, int c, bool face, bool lower) {
     if (r == 0) c = 0;  // poles: one vertex each
     if (r == R - 1) c = 0;
@@ -694,7 +724,7 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
     if (b.info[v].part == kCranium || b.info[v].part == kNeck) {
       b.info[v].part = b.V[v].y() < -125.0 ? kNeck : kCranium;
     }
-    const double psi = g.psi[b.info[v].r], phi = g.phi[b.info[v].c];
+    const double psi = NodePsi(g, b.info[v].r, b.info[v].c), phi = g.phi[b.info[v].c];
     b.UV[v] = Vector2d(1.0 + (phi + 180.0) / 360.0, (90.0 - psi) / 180.0);  // replaced below for the face
   }
 
@@ -1111,7 +1141,7 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
         }
       }
       if (d.lids && vi.grid && vi.part == kFace) {
-        const double psi = g.psi[vi.r], phi = g.phi[vi.c];
+        const double psi = NodePsi(g, vi.r, vi.c), phi = g.phi[vi.c];
         if (EyeWarp(psi, phi, vi.eye_side, lids) != EyeWarp(psi, phi, vi.eye_side, neutral_lids)) {
           D.row(v) += (head.NodePosition(vi, lids) - b.V[v]).transpose();
         }

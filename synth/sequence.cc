@@ -258,10 +258,10 @@ Sequence MakePresetSequence(const std::string& preset, double seconds) {
   if (preset == "occlusion") {
     const double d = seconds > 0 ? seconds : 4.0;
     b.s.interpolation = "linear";
-    // A ball of 65 mm radius, 250 mm in front of the head at eye height: seen from
+    // A ball of 70 mm radius, 250 mm in front of the head, 10 mm above the eyes: seen from
     // the studio's camera (~520 mm away) it is wider than the face, so mid-pass it
     // hides every landmark and the tracker has to lose the face and recover (Sec. 7).
-    b.Key(0, {{"occluder:x_mm", 300}, {"occluder:y_mm", 25}, {"occluder:z_mm", 250}, {"occluder:radius_mm", 65}});
+    b.Key(0, {{"occluder:x_mm", 300}, {"occluder:y_mm", 10}, {"occluder:z_mm", 250}, {"occluder:radius_mm", 70}});
     b.Key(0.35 * d, {{"occluder:x_mm", 150}});
     b.Key(0.65 * d, {{"occluder:x_mm", -150}});
     b.Key(d, {{"occluder:x_mm", -300}});

@@ -2,7 +2,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdio>
+#include <numbers>
 #include <filesystem>
 #include <set>
 
@@ -281,6 +285,41 @@ TEST(ProceduralRig, ExpressionsCompressTheSkinWhereWrinklesForm) {
   // Nose wrinkle: the nose bridge shortens vertically (bunny lines).
   const MatX3d sneer = rig.EvaluatePositions({}, Weights(rig, {{"noseSneer_L", 1.0}, {"noseSneer_R", 1.0}}));
   EXPECT_LT(ExtentRatio(rig, sneer, "nose", 1).first, 0.85);
+}
+
+// The face's seams with the hair (the hairline) and with the cranium under the jaw
+// follow smooth curves, not the grid's staircase of whole cells (NodePsi).
+TEST(ProceduralRig, HairlineAndJawSeamsHaveNoSteps) {
+  const FaceRig& rig = Rig();
+  const MatX3d& V = rig.neutral.V;
+  auto key = [&](int v) { return std::array<double, 3>{V(v, 0), V(v, 1), V(v, 2)}; };
+  for (const std::string other : {"hair", "cranium"}) {
+    std::set<std::array<double, 3>> seam;
+    for (int v = 0; v < rig.num_vertices(); ++v) {
+      if (InPart(rig, v, other)) seam.insert(key(v));
+    }
+    // (azimuth φ, elevation ψ) of the face's vertices on the seam, degrees.
+    std::vector<std::pair<double, double>> edge;
+    for (int v = 0; v < rig.num_vertices(); ++v) {
+      if (!InPart(rig, v, "face") || !seam.count(key(v))) continue;
+      const Vector3d p = V.row(v).transpose();
+      const double phi = std::atan2(p.x(), p.z()) * 180.0 / std::numbers::pi;
+      const double psi = std::asin(p.y() / p.norm()) * 180.0 / std::numbers::pi;
+      // The face's sides are grid columns (vertical by design): only its top and bottom.
+      if (std::abs(phi) > 79.0 || (other == "cranium" && psi > -30.0)) continue;
+      edge.emplace_back(phi, psi);
+    }
+    ASSERT_GT(edge.size(), 40u) << other;
+    std::sort(edge.begin(), edge.end());
+    double max_slope = 0.0;
+    for (size_t i = 1; i < edge.size(); ++i) {
+      const double dphi = edge[i].first - edge[i - 1].first, dpsi = std::abs(edge[i].second - edge[i - 1].second);
+      EXPECT_GT(dphi, 0.3) << other << " seam: two vertices above each other (a step) at φ " << edge[i].first;
+      max_slope = std::max(max_slope, dpsi / std::max(dphi, 1e-9));
+    }
+    std::printf("face-%s seam: %zu vertices, steepest dψ/dφ %.2f\n", other.c_str(), edge.size(), max_slope);
+    EXPECT_LT(max_slope, 1.0) << other;
+  }
 }
 
 TEST(ProceduralRig, DeterministicAndRoundTrips) {
