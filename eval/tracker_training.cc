@@ -542,6 +542,8 @@ TrackerTrainingResult TrainTrackerOnFaces(const std::vector<LabelledFace>& train
   ShapeRegressorTrainingResult trained = TrainShapeRegressor(images, shapes, options.regressor);
   TrackerTrainingResult result;
   result.regressor = std::move(trained.regressor);
+  result.report.detector_calibration_faces = CalibrateDetectorBox(&result.regressor, images, shapes);
+  result.report.detector_box = result.regressor.detector_box;
   result.report.training = trained.report;
   result.report.train_images = static_cast<int>(train.size());
   result.report.test_images = static_cast<int>(test.size());
@@ -551,13 +553,14 @@ TrackerTrainingResult TrainTrackerOnFaces(const std::vector<LabelledFace>& train
 }
 
 TrackerTrainingResult TrainTrackerOnRenders(const FaceRig& rig, const TrackerTrainingOptions& options,
-                                            const fs::path& save_dir) {
+                                            const fs::path& save_dir, const std::vector<LabelledFace>& extra_train) {
   options.Check();
   const auto start = std::chrono::steady_clock::now();
   std::vector<uint64_t> train_seeds, test_seeds;
   for (int a = 0; a < options.train_actors; ++a) train_seeds.push_back(options.data_seed * 1000 + a);
   for (int a = 0; a < options.test_actors; ++a) test_seeds.push_back(options.data_seed * 1000 + 500 + a);
-  const std::vector<LabelledFace> train = RenderLabelledFaces(rig, train_seeds, options);
+  std::vector<LabelledFace> train = RenderLabelledFaces(rig, train_seeds, options);
+  train.insert(train.end(), extra_train.begin(), extra_train.end());
   const std::vector<LabelledFace> test = RenderLabelledFaces(rig, test_seeds, options);
   if (!save_dir.empty()) {
     WriteLabelledFaces(save_dir / "train", train);
@@ -611,6 +614,8 @@ std::string TrackerTrainingReport::ToText() const {
     s += fmt::format("  detector start (HOG box + cascade): found {}/{}, error {:.4f} IOD, {:.2f} px\n", detector_found,
                      detector_frames, detector_error_iod, detector_error_px);
   }
+  s += fmt::format("detector box → landmark box, from {} training detections: centre {:+.3f}, {:+.3f} sides, side × {:.3f}\n",
+                   detector_calibration_faces, detector_box.x(), detector_box.y(), detector_box.z());
   if (sequence_frames > 0) {
     s += fmt::format("sequence ({} frames, tracked from the previous frame): found {}, detector runs {}, error {:.4f} "
                      "IOD, {:.2f} px, {:.3f} ms per tracked frame\n",
@@ -641,6 +646,10 @@ std::string TrackerTrainingReport::ToJson() const {
                             {"error_iod", detector_error_iod},
                             {"error_px", detector_error_px}};
   j["predict_ms"] = predict_ms;
+  j["detector_box"] = {{"faces", detector_calibration_faces},
+                       {"offset_x", detector_box.x()},
+                       {"offset_y", detector_box.y()},
+                       {"side_ratio", detector_box.z()}};
   if (sequence_frames > 0) {
     j["sequence"] = {{"frames", sequence_frames},       {"found", sequence_found},
                      {"detections", sequence_detections}, {"error_iod", sequence_error_iod},

@@ -119,6 +119,8 @@ struct TrackerTrainingReport {
   ShapeRegressorTrainingReport training;
   LandmarkErrorStats tracking;      // held-out, initialised from the perturbed truth
   LandmarkErrorStats box;           // held-out, initialised with the mean shape in a jittered box
+  int detector_calibration_faces = 0;  // training images whose HOG detection fitted ShapeRegressor::detector_box
+  Eigen::Vector3d detector_box{0.0, 0.0, 1.0};  // its value
   int detector_frames = 0, detector_found = 0;
   double detector_error_iod = 0, detector_error_px = 0;  // on the frames where a face was found
   double predict_ms = 0;            // mean Predict time per image (one thread)
@@ -155,8 +157,10 @@ TrackerTrainingResult TrainTrackerOnFaces(const std::vector<LabelledFace>& train
                                           const TrackerTrainingOptions& options);
 // Renders train_actors + test_actors actors and trains (held-out = the test actors).
 // `save_dir` (optional) also writes the renders (train/ and test/ subfolders).
+// `extra_train`: labelled faces (e.g. photographs) added to the training renders.
 TrackerTrainingResult TrainTrackerOnRenders(const FaceRig& rig, const TrackerTrainingOptions& options,
-                                            const std::filesystem::path& save_dir = {});
+                                            const std::filesystem::path& save_dir = {},
+                                            const std::vector<LabelledFace>& extra_train = {});
 // Reads a folder (train/ and test/ subfolders when both exist, else one folder split
 // by test_fraction) and trains.
 TrackerTrainingResult TrainTrackerOnFolder(const std::filesystem::path& folder, const TrackerTrainingOptions& options);

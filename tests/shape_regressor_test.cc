@@ -97,6 +97,14 @@ TEST(ShapeRegressor, DeterministicSaveLoadRoundTripAndVersionCheck) {
   EXPECT_LT(a.report.train_error_iod.back(), 0.8 * a.report.train_error_iod.front());
 
   const auto dir = TestDir();
+  ShapeRegressor calibrated = a.regressor;
+  calibrated.detector_box = Eigen::Vector3d(-0.01, 0.11, 0.94);
+  SaveShapeRegressor(dir / "c.ctrk", calibrated);
+  EXPECT_TRUE(LoadShapeRegressor(dir / "c.ctrk") == calibrated);  // the detector box travels in the header
+  const FaceBox moved = calibrated.FromDetectorBox({100, 50, 80, 80, 1.0});
+  EXPECT_NEAR(moved.x + 0.5 * moved.width, 140.0 - 0.8, 1e-9);
+  EXPECT_NEAR(moved.y + 0.5 * moved.height, 90.0 + 8.8, 1e-9);
+  EXPECT_NEAR(moved.width, 75.2, 1e-9);
   SaveShapeRegressor(dir / "r.ctrk", a.regressor);
   const ShapeRegressor loaded = LoadShapeRegressor(dir / "r.ctrk");
   EXPECT_TRUE(loaded == a.regressor);
@@ -273,9 +281,43 @@ TEST(ShapeRegressor, ReducesErrorOnHeldOutRenders) {
   const TrackerTrainingReport& rep = r.report;
   std::printf("%s", rep.ToText().c_str());
   EXPECT_EQ(rep.tracking.frames, 32);
+  // The HOG detector's box is fitted onto the landmark box on the training renders;
+  // dlib's box reaches higher (the forehead) than the 68 points do.
+  EXPECT_GT(rep.detector_calibration_faces, 10);
+  EXPECT_GT(rep.detector_box.y(), 0.02);
   EXPECT_LT(rep.tracking.final_iod, 0.7 * rep.tracking.initial_iod);
   EXPECT_LT(rep.box.final_iod, 0.8 * rep.box.initial_iod);
   EXPECT_LT(rep.training.train_error_iod.back(), rep.training.train_error_iod.front());
+}
+
+// Labelled photographs (here two toy faces) join the studio renders for training.
+TEST(ShapeRegressor, ExtraLabelledFacesJoinTheTrainingRenders) {
+  const FaceRig rig = BuildProceduralRig();
+  TrackerTrainingOptions o;
+  o.width = 96;
+  o.height = 72;
+  o.train_actors = 1;
+  o.test_actors = 1;
+  o.renders_per_actor = 2;
+  o.actor_resolution = 64;
+  o.max_detector_tests = 0;
+  o.regressor.num_stages = 1;
+  o.regressor.num_ferns = 4;
+  o.regressor.augmentation = 2;
+  const Toy toy = MakeToy(2, 3);
+  std::vector<LabelledFace> extra(2);
+  for (int i = 0; i < 2; ++i) {
+    extra[i].name = "photo" + std::to_string(i);
+    cv::Mat rgb;
+    cv::cvtColor(toy.images[i], rgb, cv::COLOR_GRAY2RGB);
+    rgb.convertTo(extra[i].image, CV_8UC3, 255.0);
+    extra[i].landmarks = toy.shapes[i];
+  }
+  const auto dir = TestDir();
+  const TrackerTrainingResult r = TrainTrackerOnRenders(rig, o, dir, extra);
+  EXPECT_EQ(r.report.train_images, 4);
+  EXPECT_EQ(r.report.test_images, 2);
+  EXPECT_EQ(ReadLabelledFaces(dir / "train").size(), 4u);  // saved with the renders
 }
 
 }  // namespace

@@ -24,7 +24,7 @@ namespace fs = std::filesystem;
 void AddTrainTrackerCommand(CLI::App& app) {
   auto* cmd = app.add_subcommand(
       "train-tracker", "Train the landmark regressor of the global tracker (68 iBUG points) on studio renders");
-  static std::string rig_path, out, data, save_data, config, report, size, sequence;
+  static std::string rig_path, out, data, extra_data, save_data, config, report, size, sequence;
   static std::vector<std::string> sets;
   static int actors = -1, test_actors = -1, renders = -1;
   static uint64_t seed = 1;
@@ -33,6 +33,9 @@ void AddTrainTrackerCommand(CLI::App& app) {
   cmd->add_option("--data", data,
                   "Train from a folder of NAME.png + NAME.pts (iBUG format) instead of rendering; train/ and test/ "
                   "subfolders are the split, else the last test_fraction of the names is held out");
+  cmd->add_option("--extra-data", extra_data,
+                  "With --rig: labelled faces (a folder of NAME.png + NAME.pts, its train/ subfolder if it has one, "
+                  "or a dlib XML file) added to the training renders, e.g. photographs");
   cmd->add_option("--save-data", save_data, "Also write the generated renders (train/, test/) to this folder");
   cmd->add_option("--sequence", sequence,
                   "Also track a labelled folder as a video (frames in name order) and report the error");
@@ -68,6 +71,7 @@ void AddTrainTrackerCommand(CLI::App& app) {
     options.Check();
     TrackerTrainingResult result;
     if (!data.empty()) {
+      Require(extra_data.empty(), "train-tracker: --extra-data adds to the studio renders (--rig), not to --data");
       std::printf("training the landmark regressor on %s\n", data.c_str());
       result = TrainTrackerOnFolder(data, options);
     } else {
@@ -77,7 +81,13 @@ void AddTrainTrackerCommand(CLI::App& app) {
                   options.train_actors, options.test_actors, options.renders_per_actor, options.width,
                   options.height);
       std::fflush(stdout);
-      result = TrainTrackerOnRenders(rig, options, save_data);
+      std::vector<LabelledFace> extra;
+      if (!extra_data.empty()) {
+        const fs::path e(extra_data);
+        extra = ReadLabelledFaces(fs::is_directory(e / "train") ? e / "train" : e);
+        std::printf("adding %zu labelled faces from %s to the training renders\n", extra.size(), extra_data.c_str());
+      }
+      result = TrainTrackerOnRenders(rig, options, save_data, extra);
     }
     if (!sequence.empty()) EvaluateSequenceTracking(result.regressor, ReadLabelledFaces(sequence), &result.report);
     SaveShapeRegressor(out, result.regressor);

@@ -260,6 +260,49 @@ MatX2d ShapeRegressor::MeanShapeInBox(const FaceBox& box) const {
                           std::max(box.width, box.height));
 }
 
+FaceBox ShapeRegressor::FromDetectorBox(const FaceBox& d) const {
+  const double side = std::max(d.width, d.height);
+  const double cx = d.x + 0.5 * d.width + detector_box.x() * side, cy = d.y + 0.5 * d.height + detector_box.y() * side;
+  const double s = side * detector_box.z();
+  return {cx - 0.5 * s, cy - 0.5 * s, s, s, d.score};
+}
+
+int CalibrateDetectorBox(ShapeRegressor* regressor, const std::vector<cv::Mat>& images,
+                         const std::vector<MatX2d>& shapes, int upsample, double threshold) {
+  Require(images.size() == shapes.size(), "CalibrateDetectorBox: as many shapes as images");
+  const HogFaceDetector detector(upsample, threshold);
+  std::vector<double> dx, dy, ratio;
+  for (size_t i = 0; i < images.size(); ++i) {
+    const FaceBox t = BoxOfPoints(shapes[i]);
+    const double side_t = std::max(t.width, t.height);
+    const double tx0 = t.x + 0.5 * t.width - 0.5 * side_t, ty0 = t.y + 0.5 * t.height - 0.5 * side_t;
+    double best_iou = 0.3;
+    const FaceBox* best = nullptr;
+    const std::vector<FaceBox> faces = detector.Detect(images[i]);
+    for (const FaceBox& d : faces) {
+      const double ix = std::max(0.0, std::min(d.x + d.width, tx0 + side_t) - std::max(d.x, tx0));
+      const double iy = std::max(0.0, std::min(d.y + d.height, ty0 + side_t) - std::max(d.y, ty0));
+      const double inter = ix * iy, iou = inter / (d.width * d.height + side_t * side_t - inter);
+      if (iou > best_iou) {
+        best_iou = iou;
+        best = &d;
+      }
+    }
+    if (best == nullptr) continue;
+    const double side_d = std::max(best->width, best->height);
+    dx.push_back((t.x + 0.5 * t.width - (best->x + 0.5 * best->width)) / side_d);
+    dy.push_back((t.y + 0.5 * t.height - (best->y + 0.5 * best->height)) / side_d);
+    ratio.push_back(side_t / side_d);
+  }
+  if (dx.empty()) return 0;
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  regressor->detector_box = Eigen::Vector3d(median(dx), median(dy), median(ratio));
+  return static_cast<int>(dx.size());
+}
+
 void ShapeRegressor::Check(const std::string& what) const {
   options.Check();
   const size_t T = num_stages(), K = num_ferns(), F = depth(), P = num_pixels(), L = num_landmarks;
@@ -517,6 +560,7 @@ void SaveShapeRegressor(const std::filesystem::path& path, const ShapeRegressor&
   header["kind"] = "crease shape regressor (68 iBUG landmarks, Cao et al. 2012 explicit shape regression)";
   header["options"] = nlohmann::json::parse(OptionsToJson(regressor.options));
   header["num_landmarks"] = regressor.num_landmarks;
+  header["detector_box"] = {regressor.detector_box.x(), regressor.detector_box.y(), regressor.detector_box.z()};
   ArrayFileWriter w(header.dump());
   const int64_t T = regressor.num_stages(), K = regressor.num_ferns(), F = regressor.depth(),
                 P = regressor.num_pixels(), L = regressor.num_landmarks, B = int64_t{1} << F;
@@ -540,6 +584,12 @@ ShapeRegressor LoadShapeRegressor(const std::filesystem::path& path) {
             fmt::format("{}: the header lacks 'options' or 'num_landmarks'", what));
     SetOptionsFromJson(header.at("options").dump(), what, &r.options);
     r.num_landmarks = header.at("num_landmarks").get<int>();
+    if (header.contains("detector_box")) {  // optional: older models use the detector's box as is
+      const std::vector<double> b = header.at("detector_box").get<std::vector<double>>();
+      Require(b.size() == 3 && std::isfinite(b[0]) && std::isfinite(b[1]) && std::isfinite(b[2]) && b[2] > 0.0,
+              fmt::format("{}: 'detector_box' must be three finite numbers with a positive side ratio", what));
+      r.detector_box = Eigen::Vector3d(b[0], b[1], b[2]);
+    }
   } catch (const nlohmann::json::exception& e) {
     throw Error(fmt::format("{}: malformed header: {}", what, e.what()));
   }
@@ -565,6 +615,7 @@ void RegressorLandmarkOptions::VisitFields(OptionVisitor& v) {
   v.Field("upsample", upsample);
   v.Field("detection_threshold", detection_threshold);
   v.Field("detection_passes", detection_passes);
+  v.Field("detection_initialisations", detection_initialisations);
   v.Field("max_scale_change", max_scale_change);
   v.Field("max_outside_fraction", max_outside_fraction);
   v.Field("max_shape_deviation", max_shape_deviation);
@@ -576,6 +627,8 @@ void RegressorLandmarkOptions::Check() const {
   CheckGe(o, "upsample", upsample, 0);
   CheckLe(o, "upsample", upsample, 3);
   CheckGe(o, "detection_passes", detection_passes, 1);
+  CheckGe(o, "detection_initialisations", detection_initialisations, 1);
+  CheckLe(o, "detection_initialisations", detection_initialisations, 5);
   CheckGt(o, "max_scale_change", max_scale_change, 1.0);
   CheckGe(o, "max_outside_fraction", max_outside_fraction, 0.0);
   CheckGt(o, "max_shape_deviation", max_shape_deviation, 0.0);
@@ -656,8 +709,30 @@ LandmarkResult RegressorLandmarkSource::Track(const cv::Mat& image) {
   const std::vector<FaceBox> faces = m.Detect(image);
   if (faces.empty()) return r;
   r.box = faces.front();
-  MatX2d shape = m.regressor.MeanShapeInBox(r.box);
-  for (int pass = 0; pass < m.options.detection_passes; ++pass) shape = m.regressor.Predict(image, shape);
+  const FaceBox start = m.regressor.FromDetectorBox(r.box);
+  // Several starts in the box, the median of their results (Cao et al. 2012).
+  static constexpr double kStarts[5][3] = {{0, 0, 1}, {-0.12, 0, 1}, {0.12, 0, 1}, {0, 0, 0.9}, {0, 0, 1.1}};
+  std::vector<MatX2d> results;
+  for (int k = 0; k < m.options.detection_initialisations; ++k) {
+    FaceBox b = start;
+    const double w = b.width * kStarts[k][2], h = b.height * kStarts[k][2];
+    b.x += 0.5 * (b.width - w) + kStarts[k][0] * b.width;
+    b.y += 0.5 * (b.height - h) + kStarts[k][1] * b.height;
+    b.width = w;
+    b.height = h;
+    MatX2d s = m.regressor.MeanShapeInBox(b);
+    for (int pass = 0; pass < m.options.detection_passes; ++pass) s = m.regressor.Predict(image, s);
+    results.push_back(std::move(s));
+  }
+  MatX2d shape(results.front().rows(), 2);
+  std::vector<double> values(results.size());
+  for (Eigen::Index i = 0; i < shape.rows(); ++i) {
+    for (int c = 0; c < 2; ++c) {
+      for (size_t k = 0; k < results.size(); ++k) values[k] = results[k](i, c);
+      std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
+      shape(i, c) = values[values.size() / 2];
+    }
+  }
   if (IsLost(shape, size, nullptr)) return r;
   r.found = true;
   r.points = shape;
