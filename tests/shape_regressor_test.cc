@@ -171,16 +171,22 @@ TEST(ShapeRegressor, LandmarkSourceFlagsLostShapes) {
   EXPECT_TRUE(r.detected);
 }
 
-TEST(ShapeRegressor, LabelledFaceFolderRoundTrip) {
-  const Toy toy = MakeToy(2, 7);
-  std::vector<LabelledFace> faces(2);
-  for (int i = 0; i < 2; ++i) {
-    faces[i].name = "face" + std::to_string(i);
+// The toy's images as 8-bit RGB labelled faces named PREFIX0, PREFIX1, …
+std::vector<LabelledFace> ToyFaces(const Toy& toy, const std::string& prefix) {
+  std::vector<LabelledFace> faces(toy.images.size());
+  for (size_t i = 0; i < faces.size(); ++i) {
+    faces[i].name = prefix + std::to_string(i);
     cv::Mat rgb;
     cv::cvtColor(toy.images[i], rgb, cv::COLOR_GRAY2RGB);
     rgb.convertTo(faces[i].image, CV_8UC3, 255.0);
     faces[i].landmarks = toy.shapes[i];
   }
+  return faces;
+}
+
+TEST(ShapeRegressor, LabelledFaceFolderRoundTrip) {
+  const Toy toy = MakeToy(2, 7);
+  const std::vector<LabelledFace> faces = ToyFaces(toy, "face");
   const auto dir = TestDir();
   WriteLabelledFaces(dir, faces);
   const std::vector<LabelledFace> back = ReadLabelledFaces(dir);
@@ -304,15 +310,7 @@ TEST(ShapeRegressor, ExtraLabelledFacesJoinTheTrainingRenders) {
   o.regressor.num_stages = 1;
   o.regressor.num_ferns = 4;
   o.regressor.augmentation = 2;
-  const Toy toy = MakeToy(2, 3);
-  std::vector<LabelledFace> extra(2);
-  for (int i = 0; i < 2; ++i) {
-    extra[i].name = "photo" + std::to_string(i);
-    cv::Mat rgb;
-    cv::cvtColor(toy.images[i], rgb, cv::COLOR_GRAY2RGB);
-    rgb.convertTo(extra[i].image, CV_8UC3, 255.0);
-    extra[i].landmarks = toy.shapes[i];
-  }
+  const std::vector<LabelledFace> extra = ToyFaces(MakeToy(2, 3), "photo");
   const auto dir = TestDir();
   const TrackerTrainingResult r = TrainTrackerOnRenders(rig, o, dir, extra);
   EXPECT_EQ(r.report.train_images, 4);
