@@ -480,22 +480,13 @@ void EvaluateShapeRegressor(const ShapeRegressor& regressor, const std::vector<L
   report->predict_ms = predicts ? 1e3 * predict_s / predicts : 0.0;
   if (detector_frames > 0) {
     RegressorLandmarkSource source(regressor);
-    const int n = std::min<int>(detector_frames, static_cast<int>(faces.size()));
-    double sum_iod = 0, sum_px = 0;
-    for (int i = 0; i < n; ++i) {
-      source.Reset();
-      const LandmarkResult r = source.Track(faces[i].image);
-      ++report->detector_frames;
-      if (!r.found) continue;
-      ++report->detector_found;
-      const double e = (r.points - faces[i].landmarks).rowwise().norm().mean();
-      sum_px += e;
-      sum_iod += e / Iod(faces[i].landmarks);
-    }
-    if (report->detector_found) {
-      report->detector_error_px = sum_px / report->detector_found;
-      report->detector_error_iod = sum_iod / report->detector_found;
-    }
+    const size_t n = std::min<size_t>(static_cast<size_t>(detector_frames), faces.size());
+    const LandmarkSourceEvaluation e =
+        EvaluateLandmarkSource(source, std::vector<LabelledFace>(faces.begin(), faces.begin() + static_cast<std::ptrdiff_t>(n)));
+    report->detector_frames += e.faces;
+    report->detector_found += e.found;
+    report->detector_error_px = e.error_px;
+    report->detector_error_iod = e.error_iod;
   }
 }
 

@@ -191,11 +191,13 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
     if (seam.count({rig.neutral.V(v, 0), rig.neutral.V(v, 1), rig.neutral.V(v, 2)})) rim[v] = 1;
   }
   // Distance from the rim over the face triangles' edges (Dijkstra, neutral lengths).
-  TriMesh face_mesh;
+  TriMesh face_mesh;  // the face triangles, rig vertex ids
   face_mesh.V = rig.neutral.V;
   face_mesh.F.resize(static_cast<Eigen::Index>(underlay_faces.size()), 3);
-  for (size_t f = 0; f < underlay_faces.size(); ++f) {
-    for (int k = 0; k < 3; ++k) face_mesh.F(static_cast<Eigen::Index>(f), k) = s.underlay_source[underlay_faces[f][k]];
+  Eigen::Index face_rows = 0;
+  for (int f = 0; f < rig.neutral.num_faces(); ++f) {
+    const Eigen::Vector3i t = rig.neutral.F.row(f).transpose();
+    if (is_face(t[0]) && is_face(t[1]) && is_face(t[2])) face_mesh.F.row(face_rows++) = t.transpose();
   }
   std::vector<int> rim_vertices;
   for (int v = 0; v < nr; ++v) {
