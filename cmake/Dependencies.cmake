@@ -13,6 +13,7 @@ endmacro()
 
 crease_require(Eigen3 libeigen3-dev 3.4 NO_MODULE)
 crease_require(TBB libtbb-dev)
+crease_require(ZLIB zlib1g-dev)
 crease_require(OpenCV "libopencv-dev libopencv-contrib-dev" 4 COMPONENTS core imgproc imgcodecs video calib3d objdetect videoio)
 crease_require(embree libembree-dev 3)
 crease_require(nlohmann_json nlohmann-json3-dev 3)

@@ -7,11 +7,13 @@
 #include <fstream>
 #include <set>
 #include <fmt/format.h>
+#include <zlib.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
 #include "core/file_util.h"
+#include "core/options.h"
 
 namespace crease {
 namespace fs = std::filesystem;
@@ -152,23 +154,69 @@ constexpr char kMagic[8] = {'C', 'R', 'E', 'A', 'S', 'R', 'I', 'G'};
 struct ArrayDesc {
   std::string name, dtype;
   std::vector<int64_t> shape;
+  std::string encoding = "raw";  // or "zlib"
+  uint64_t stored_bytes = 0;     // bytes in the file (zlib)
+  double scale = 1.0;            // i16: value = integer · scale
   size_t bytes() const {
-    size_t n = dtype == "f64" ? 8 : dtype == "u8" ? 1 : 4;
+    size_t n = dtype == "f64" ? 8 : dtype == "u8" ? 1 : dtype == "i16" ? 2 : 4;
     for (auto s : shape) n *= static_cast<size_t>(s);
     return n;
   }
 };
 
+// One array ready to write: its description and its bytes as stored.
+struct StoredArray {
+  ArrayDesc desc;
+  std::string data;
+};
+
 template <class T>
-void WriteRaw(std::ostream& out, const T* data, size_t count) {
+std::string RawBytes(const T* data, size_t count) {
   static_assert(std::endian::native == std::endian::little, "crease files are little-endian");
-  out.write(reinterpret_cast<const char*>(data), static_cast<std::streamsize>(count * sizeof(T)));
+  return std::string(reinterpret_cast<const char*>(data), count * sizeof(T));
+}
+
+// A basis (3·#V)×K as 16-bit steps of `quantum` mm (coarser when a delta would
+// overflow), column-major like the float layout.
+StoredArray QuantizedBasis(const std::string& name, const Eigen::MatrixXf& B, double quantum) {
+  const double max_abs = B.size() ? static_cast<double>(B.cwiseAbs().maxCoeff()) : 0.0;
+  const double scale = std::max(quantum, max_abs / 32767.0);
+  std::vector<int16_t> q(static_cast<size_t>(B.size()));
+  for (Eigen::Index i = 0; i < B.size(); ++i) q[i] = static_cast<int16_t>(std::lround(B.data()[i] / scale));
+  StoredArray a{{name, "i16", {B.cols(), B.rows()}}, RawBytes(q.data(), q.size())};
+  a.desc.scale = scale;
+  return a;
+}
+
+std::string ZlibCompress(const std::string& raw, const std::string& what) {
+  uLongf n = compressBound(static_cast<uLong>(raw.size()));
+  std::string out(n, '\0');
+  const int rc = compress2(reinterpret_cast<Bytef*>(out.data()), &n, reinterpret_cast<const Bytef*>(raw.data()),
+                           static_cast<uLong>(raw.size()), 9);
+  Require(rc == Z_OK, fmt::format("{}: zlib compression failed ({})", what, rc));
+  out.resize(n);
+  return out;
+}
+
+// Inflates exactly `expected` bytes. zlib cannot expand more than ~1032×, so a
+// declared size beyond that is refused before anything is allocated.
+std::string ZlibDecompress(const char* data, size_t stored, size_t expected, const std::string& what) {
+  Require(expected <= 1100 * stored + 1024,
+          fmt::format("{}: declared size {} bytes cannot come from {} compressed bytes", what, expected, stored));
+  std::string out(expected, '\0');
+  uLongf n = static_cast<uLongf>(expected);
+  const int rc = uncompress(reinterpret_cast<Bytef*>(out.data()), &n, reinterpret_cast<const Bytef*>(data),
+                            static_cast<uLong>(stored));
+  Require(rc == Z_OK && n == expected, fmt::format("{}: corrupt compressed data (zlib {}, {} of {} bytes)", what, rc,
+                                                   static_cast<size_t>(n), expected));
+  return out;
 }
 
 }  // namespace
 
-void WriteRig(const fs::path& path, const FaceRig& rig) {
+void WriteRig(const fs::path& path, const FaceRig& rig, const RigWriteOptions& options) {
   rig.Validate(path.string());
+  CheckGt("RigWriteOptions", "quantum_mm", options.quantum_mm, 0.0);
   json header;
   header["format"] = "crease rig";
   header["source"] = rig.source;
@@ -180,39 +228,48 @@ void WriteRig(const fs::path& path, const FaceRig& rig) {
   header["landmarks"] = lms;
   header["part_names"] = rig.part_names;
   const int nv = rig.num_vertices(), nf = rig.neutral.num_faces();
-  std::vector<ArrayDesc> arrays = {
-      {"V", "f64", {nv, 3}},
-      {"F", "i32", {nf, 3}},
-      {"UV", "f64", {nv, 2}},
-      {"identity_basis", "f32", {rig.identity_basis.cols(), 3LL * nv}},
-      {"expression_basis", "f32", {rig.expression_basis.cols(), 3LL * nv}},
-      {"original_vertex", "i32", {static_cast<int64_t>(rig.original_vertex.size())}},
-      {"vertex_part", "u8", {static_cast<int64_t>(rig.vertex_part.size())}}};
-  for (const auto& r : rig.regions) arrays.push_back({"region:" + r.name, "u8", {r.mask.rows, r.mask.cols}});
+  // Bases: column-major (3·#V)×K, each mode contiguous, matching the declared shape [K, 3·#V].
+  auto float_basis = [&](const std::string& name, const Eigen::MatrixXf& B) {
+    return StoredArray{{name, "f32", {B.cols(), 3LL * nv}}, RawBytes(B.data(), static_cast<size_t>(B.size()))};
+  };
+  std::vector<StoredArray> arrays;
+  arrays.push_back({{"V", "f64", {nv, 3}}, RawBytes(rig.neutral.V.data(), rig.neutral.V.size())});
+  arrays.push_back({{"F", "i32", {nf, 3}}, RawBytes(rig.neutral.F.data(), rig.neutral.F.size())});
+  arrays.push_back({{"UV", "f64", {nv, 2}}, RawBytes(rig.neutral.UV.data(), rig.neutral.UV.size())});
+  for (const auto& [name, B] : {std::pair<const char*, const Eigen::MatrixXf*>{"identity_basis", &rig.identity_basis},
+                                {"expression_basis", &rig.expression_basis}}) {
+    arrays.push_back(options.compact ? QuantizedBasis(name, *B, options.quantum_mm) : float_basis(name, *B));
+  }
+  arrays.push_back({{"original_vertex", "i32", {static_cast<int64_t>(rig.original_vertex.size())}},
+                    RawBytes(rig.original_vertex.data(), rig.original_vertex.size())});
+  arrays.push_back({{"vertex_part", "u8", {static_cast<int64_t>(rig.vertex_part.size())}},
+                    RawBytes(rig.vertex_part.data(), rig.vertex_part.size())});
+  for (const auto& r : rig.regions) {
+    const cv::Mat m = r.mask.isContinuous() ? r.mask : r.mask.clone();
+    arrays.push_back({{"region:" + r.name, "u8", {r.mask.rows, r.mask.cols}}, RawBytes(m.data, m.total())});
+  }
   json arr = json::array();
-  for (const auto& a : arrays) arr.push_back({{"name", a.name}, {"dtype", a.dtype}, {"shape", a.shape}});
+  for (auto& a : arrays) {
+    json d = {{"name", a.desc.name}, {"dtype", a.desc.dtype}, {"shape", a.desc.shape}};
+    if (a.desc.dtype == "i16") d["scale"] = a.desc.scale;
+    if (options.compact) {
+      a.data = ZlibCompress(a.data, path.string());
+      d["encoding"] = "zlib";
+      d["stored_bytes"] = a.data.size();
+    }
+    arr.push_back(d);
+  }
   header["arrays"] = arr;
   const std::string header_text = header.dump();
 
   WriteFileAtomic(path, [&](std::ostream& out) {
     out.write(kMagic, 8);
     const uint32_t version = FaceRig::kFormatVersion;
-    WriteRaw(out, &version, 1);
+    out.write(reinterpret_cast<const char*>(&version), 4);
     const uint64_t len = header_text.size();
-    WriteRaw(out, &len, 1);
+    out.write(reinterpret_cast<const char*>(&len), 8);
     out.write(header_text.data(), static_cast<std::streamsize>(header_text.size()));
-    WriteRaw(out, rig.neutral.V.data(), rig.neutral.V.size());
-    WriteRaw(out, rig.neutral.F.data(), rig.neutral.F.size());
-    WriteRaw(out, rig.neutral.UV.data(), rig.neutral.UV.size());
-    // Column-major (3·#V)×K: each mode contiguous, matching the declared shape [K, 3·#V].
-    WriteRaw(out, rig.identity_basis.data(), rig.identity_basis.size());
-    WriteRaw(out, rig.expression_basis.data(), rig.expression_basis.size());
-    WriteRaw(out, rig.original_vertex.data(), rig.original_vertex.size());
-    WriteRaw(out, rig.vertex_part.data(), rig.vertex_part.size());
-    for (const auto& r : rig.regions) {
-      const cv::Mat m = r.mask.isContinuous() ? r.mask : r.mask.clone();
-      WriteRaw(out, m.data, m.total());
-    }
+    for (const auto& a : arrays) out.write(a.data.data(), static_cast<std::streamsize>(a.data.size()));
   });
 }
 
@@ -235,7 +292,7 @@ FaceRig ReadRig(const fs::path& path) {
   pos = 8;
   uint32_t version;
   std::memcpy(&version, take(4, "version"), 4);
-  if (version != FaceRig::kFormatVersion) {
+  if (version < 1 || version > FaceRig::kFormatVersion) {
     throw Error(fmt::format("{}: rig format version {} is not supported (this crease reads version {}); "
                             "re-create the rig with this version of crease",
                             what, version, FaceRig::kFormatVersion));
@@ -261,10 +318,23 @@ FaceRig ReadRig(const fs::path& path) {
     for (const auto& a : header.at("arrays")) {
       ArrayDesc d{a.at("name").get<std::string>(), a.at("dtype").get<std::string>(),
                   a.at("shape").get<std::vector<int64_t>>()};
+      d.encoding = a.value("encoding", std::string("raw"));
+      d.scale = a.value("scale", 1.0);
       for (auto s : d.shape) {
         if (s < 0 || s > (int64_t{1} << 34)) throw Error(fmt::format("{}: array '{}' has an invalid shape", what, d.name));
       }
-      const char* p = take(d.bytes(), d.name.c_str());
+      std::string inflated;
+      const char* p = nullptr;
+      if (d.encoding == "zlib") {
+        const uint64_t stored = a.at("stored_bytes").get<uint64_t>();
+        const char* z = take(stored, d.name.c_str());
+        inflated = ZlibDecompress(z, stored, d.bytes(), fmt::format("{}: array '{}'", what, d.name));
+        p = inflated.data();
+      } else if (d.encoding == "raw") {
+        p = take(d.bytes(), d.name.c_str());
+      } else {
+        throw Error(fmt::format("{}: array '{}' has an unknown encoding '{}'", what, d.name, d.encoding));
+      }
       auto dims = [&](size_t n) {
         if (d.shape.size() != n) throw Error(fmt::format("{}: array '{}' must have {} dimensions", what, d.name, n));
       };
@@ -292,10 +362,21 @@ FaceRig ReadRig(const fs::path& path) {
         std::memcpy(rig.neutral.F.data(), p, d.bytes());
       } else if (d.name == "identity_basis" || d.name == "expression_basis") {
         dims(2);
-        dtype("f32");
         Eigen::MatrixXf& B = d.name == "identity_basis" ? rig.identity_basis : rig.expression_basis;
         B.resize(d.shape[1], d.shape[0]);
-        std::memcpy(B.data(), p, d.bytes());
+        if (d.dtype == "i16") {
+          if (!(std::isfinite(d.scale) && d.scale > 0)) {
+            throw Error(fmt::format("{}: array '{}' has an invalid scale", what, d.name));
+          }
+          for (Eigen::Index i = 0; i < B.size(); ++i) {
+            int16_t q;
+            std::memcpy(&q, p + 2 * i, 2);
+            B.data()[i] = static_cast<float>(q * d.scale);
+          }
+        } else {
+          dtype("f32");
+          std::memcpy(B.data(), p, d.bytes());
+        }
       } else if (d.name == "original_vertex") {
         dims(1);
         dtype("i32");

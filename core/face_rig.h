@@ -13,6 +13,10 @@
 //   "CREASRIG" | u32 version | u64 header length | header (JSON, UTF-8) | arrays
 // The header lists names, landmarks, region names, metadata and, for each array,
 // its name, dtype and shape; arrays follow in that order, little-endian.
+// Version 2 adds compact storage (RigWriteOptions::compact): an array may be
+// zlib-compressed ("encoding": "zlib", "stored_bytes": n) and the blendshape
+// bases may be 16-bit integers ("dtype": "i16", "scale": mm per step). Version 1
+// files are still read.
 #pragma once
 
 #include <filesystem>
@@ -40,7 +44,7 @@ struct RegionMask {
 const std::vector<std::string>& StandardRegionNames();
 
 struct FaceRig {
-  static constexpr uint32_t kFormatVersion = 1;
+  static constexpr uint32_t kFormatVersion = 2;
 
   TriMesh neutral;                 // mean identity, neutral expression; UVs required.
   Eigen::MatrixXf identity_basis;  // (3·#V)×#I deltas (x0, y0, z0, x1, …), mm.
@@ -85,7 +89,15 @@ struct FaceRig {
   void Validate(const std::string& what) const;
 };
 
-void WriteRig(const std::filesystem::path& path, const FaceRig& rig);
+struct RigWriteOptions {
+  // Compact storage, e.g. for a rig shipped in a repository: the identity and
+  // expression deltas quantised to quantum_mm (16-bit; a coarser step where a
+  // basis exceeds ±32767 steps) and every array zlib-compressed.
+  bool compact = false;
+  double quantum_mm = 0.005;  // mm per step of the quantised deltas (error ≤ half a step)
+};
+
+void WriteRig(const std::filesystem::path& path, const FaceRig& rig, const RigWriteOptions& options = {});
 // Errors name the file: wrong magic ("not a crease rig"), another version, truncated data.
 FaceRig ReadRig(const std::filesystem::path& path);
 

@@ -687,7 +687,8 @@ TriangulatedMesh TriangulateAndSplitSeams(const PolygonMesh& shape, const std::s
       const int t = with_uv ? shape.corner_uv[c] : -1;
       int v = -1;
       for (int w = first; w < static_cast<int>(vertex_uv.size()); ++w) {
-        if (vertex_uv[w] == t) {
+        // Equal coordinates under two "vt" indices are one UV (exporters repeat them).
+        if (vertex_uv[w] == t || (t >= 0 && shape.uvs.row(vertex_uv[w]) == shape.uvs.row(t))) {
           v = w;
           break;
         }

@@ -63,8 +63,10 @@ struct TriangulatedMesh {
 //  * each polygon with corners c0..c(k-1) is fan-triangulated from its first
 //    corner: (c0, c1, c2), (c0, c2, c3), ..., (c0, c(k-2), c(k-1)); this is exact
 //    for planar convex polygons, which quads of face scans are close to;
-//  * seams are split: one output vertex per distinct (position index, uv index)
-//    pair used by some corner;
+//  * seams are split: one output vertex per distinct (position index, uv) pair
+//    used by some corner, where two "vt" indices with equal coordinates count as
+//    one uv (exporters repeat texture coordinates; splitting there would cut the
+//    chart along a seam that is not one);
 //  * output vertices are ordered by position index, then by first appearance of the
 //    pair in corner order, so the output vertices of any range of position indices
 //    form one contiguous range (a region given as a range of OBJ vertex ids stays a

@@ -1,6 +1,9 @@
 #include "core/rig_import.h"
 
 #include <algorithm>
+#include <cctype>
+#include <climits>
+#include <cmath>
 #include <map>
 #include <set>
 #include <regex>
@@ -9,6 +12,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/error.h"
+#include "core/file_util.h"
 #include "core/json_io.h"
 #include "core/mesh_io.h"
 #include "core/options.h"
@@ -21,6 +25,8 @@ void RigImportOptions::VisitFields(OptionVisitor& v) {
   v.Field("face_first", face_first);
   v.Field("face_last", face_last);
   v.Field("face_vertices", face_vertices);
+  v.Field("landmark_ids", landmark_ids);
+  v.Field("max_identity_modes", max_identity_modes);
   v.Field("region_mask_size", region_mask_size);
   v.Field("zero_threshold_mm", zero_threshold_mm);
   v.Field("flip_v", flip_v);
@@ -32,6 +38,127 @@ void RigImportOptions::Check() const {
   if (face_last >= 0) CheckGt("RigImportOptions", "face_last", face_last, face_first);
   CheckGe("RigImportOptions", "region_mask_size", region_mask_size, 16);
   CheckGe("RigImportOptions", "zero_threshold_mm", zero_threshold_mm, 0.0);
+  CheckGe("RigImportOptions", "max_identity_modes", max_identity_modes, -1);
+  if (!parts.empty()) {
+    Require(face_vertices.empty() && face_first == 0 && face_last < 0,
+            "RigImportOptions: give either parts or a face region (face_first/face_last/face_vertices), not both");
+    bool has_face = false;
+    for (const auto& p : parts) has_face = has_face || p.name == "face";
+    Require(has_face, "RigImportOptions: parts must include one named \"face\" (the UV chart)");
+  }
+}
+
+VertexRange ParseVertexRange(const std::string& text, const std::string& what) {
+  static const std::regex re(R"(\s*\[\s*(\d+)\s*,\s*(\d+)\s*([\])])\s*)");
+  std::smatch m;
+  const auto bad = [&] {
+    return Error(fmt::format("{}: vertex range '{}' must be written \"[A, B]\" (B included, as in ICT-FaceKit's "
+                             "tables) or \"[A, B)\" (B excluded)", what, text));
+  };
+  if (!std::regex_match(text, m, re)) throw bad();
+  VertexRange r;
+  try {
+    r.first = std::stoi(m[1].str());
+    r.end = std::stoi(m[2].str()) + (m[3].str() == "]" ? 1 : 0);
+  } catch (const std::exception&) {
+    throw bad();
+  }
+  Require(r.end > r.first, fmt::format("{}: vertex range '{}' is empty", what, text));
+  return r;
+}
+
+std::vector<RigPart> ReadRigParts(const fs::path& path) {
+  const std::string what = path.string();
+  const nlohmann::json j = ReadJsonFile(path);
+  Require(j.is_array() && !j.empty(),
+          fmt::format("{}: expected a JSON list of parts [{{\"name\": …, \"vertices\": \"[A, B]\"}}, …]", what));
+  std::vector<RigPart> parts;
+  std::set<std::string> names;
+  std::vector<std::pair<VertexRange, std::string>> all;
+  for (size_t i = 0; i < j.size(); ++i) {
+    const auto& e = j[i];
+    const std::string at = fmt::format("{}: part {}", what, i);
+    Require(e.is_object(), at + ": expected an object with \"name\" and \"vertices\"");
+    for (auto it = e.begin(); it != e.end(); ++it) {
+      Require(it.key() == "name" || it.key() == "vertices",
+              fmt::format("{}: unknown key '{}' (expected name, vertices)", at, it.key()));
+    }
+    Require(e.contains("name") && e["name"].is_string() && !e["name"].get<std::string>().empty(),
+            at + ": \"name\" must be a non-empty string");
+    RigPart part;
+    part.name = e["name"].get<std::string>();
+    Require(names.insert(part.name).second, fmt::format("{}: part name '{}' is used twice", what, part.name));
+    Require(part.name != "face_rim", fmt::format("{}: the part name 'face_rim' is reserved", what));
+    Require(e.contains("vertices"), at + ": missing \"vertices\"");
+    const auto& r = e["vertices"];
+    const std::string where = fmt::format("{} ('{}')", at, part.name);
+    if (r.is_string()) {
+      part.ranges.push_back(ParseVertexRange(r.get<std::string>(), where));
+    } else if (r.is_array()) {
+      for (const auto& x : r) {
+        Require(x.is_string(), where + ": \"vertices\" must be a range string or a list of them");
+        part.ranges.push_back(ParseVertexRange(x.get<std::string>(), where));
+      }
+    } else {
+      throw Error(where + ": \"vertices\" must be a range string or a list of them");
+    }
+    Require(!part.ranges.empty(), where + ": no vertex range");
+    for (const auto& vr : part.ranges) all.emplace_back(vr, part.name);
+    parts.push_back(std::move(part));
+  }
+  std::sort(all.begin(), all.end(), [](auto& a, auto& b) { return a.first.first < b.first.first; });
+  for (size_t i = 1; i < all.size(); ++i) {
+    Require(all[i].first.first >= all[i - 1].first.end,
+            fmt::format("{}: the vertex ranges of parts '{}' and '{}' overlap (vertex {})", what,
+                        all[i - 1].second, all[i].second, all[i].first.first));
+  }
+  Require(names.count("face") == 1, fmt::format("{}: no part is named \"face\" (the UV chart)", what));
+  return parts;
+}
+
+std::vector<int> ParseLandmarkIds(const std::string& spec) {
+  std::string text = spec, what = "--landmarks";
+  std::error_code ec;
+  if (fs::is_regular_file(spec, ec)) {
+    what = spec;
+    if (LowerExtension(spec) == ".json") {
+      const nlohmann::json j = ReadJsonFile(spec);
+      const nlohmann::json* list = &j;
+      if (j.is_object() && j.contains("idx_to_landmark_verts")) list = &j["idx_to_landmark_verts"];
+      Require(list->is_array(), fmt::format("{}: expected a JSON list of vertex ids or an object with "
+                                            "\"idx_to_landmark_verts\" (ICT-FaceKit's vertex_indices.json)", spec));
+      std::vector<int> ids;
+      for (const auto& x : *list) {
+        Require(x.is_number_integer() && x.get<int64_t>() >= 0 && x.get<int64_t>() < INT32_MAX,
+                fmt::format("{}: landmark entry {} is not a vertex id", spec, ids.size()));
+        ids.push_back(x.get<int>());
+      }
+      Require(!ids.empty(), fmt::format("{}: no landmark ids", spec));
+      return ids;
+    }
+    text = ReadFileToString(spec);
+  }
+  std::vector<int> ids;
+  std::string token;
+  auto flush = [&] {
+    if (token.empty()) return;
+    Require(token.size() <= 9, fmt::format("{}: landmark id '{}' is too large", what, token));
+    ids.push_back(std::stoi(token));
+    token.clear();
+  };
+  for (const char c : text) {
+    if (std::isdigit(static_cast<unsigned char>(c))) {
+      token.push_back(c);
+    } else if (c == ',' || std::isspace(static_cast<unsigned char>(c))) {
+      flush();
+    } else {
+      throw Error(fmt::format("{}: unexpected '{}' in a landmark id list (expected ids separated by commas or "
+                              "spaces)", what, c));
+    }
+  }
+  flush();
+  Require(!ids.empty(), fmt::format("{}: no landmark ids", what));
+  return ids;
 }
 
 double UnitsToMm(const std::string& units) {
@@ -103,6 +230,62 @@ std::vector<int> CropToRegion(TriangulatedMesh* tm, const std::vector<char>& in_
   return remap;
 }
 
+// Parts mode (RigImportOptions::parts): each rig vertex's part from its OBJ id;
+// face vertices off the [0,1]² chart become "face_rim"; every other part gets its
+// own UV tile u ∈ [2 + p, 3 + p) (in the OBJ's v convention; the flip comes later).
+void AssignParts(const std::vector<RigPart>& parts, const std::vector<int>& part_of_original, FaceRig* rig,
+                 RigImportReport* rep) {
+  for (const auto& p : parts) rig->part_names.push_back(p.name);
+  const int face = rig->PartIndex("face");
+  const int nv = rig->num_vertices();
+  rig->vertex_part.resize(nv);
+  int rim = -1;
+  for (int v = 0; v < nv; ++v) {
+    int p = part_of_original[rig->original_vertex[v]];
+    const double u = rig->neutral.UV(v, 0), w = rig->neutral.UV(v, 1);
+    if (p == face && !(u >= 0.0 && u <= 1.0 && w >= 0.0 && w <= 1.0)) {
+      if (rim < 0) {
+        rim = static_cast<int>(rig->part_names.size());
+        rig->part_names.push_back("face_rim");
+      }
+      p = rim;
+    }
+    rig->vertex_part[v] = static_cast<uint8_t>(p);
+    if (p != face) rig->neutral.UV(v, 0) = 2.0 + p + (u - std::floor(u));
+  }
+  Require(rig->part_names.size() <= 255, "a rig has at most 255 parts");
+  std::vector<int> count(rig->part_names.size(), 0);
+  for (uint8_t p : rig->vertex_part) ++count[p];
+  for (size_t p = 0; p < count.size(); ++p) rep->part_vertices.emplace_back(rig->part_names[p], count[p]);
+}
+
+// Landmarks (OBJ vertex ids) → rig vertices: of the vertices carrying the id (seam
+// splits), the first on the face chart, else the first. Errors name `what`.
+void AddLandmarks(const std::vector<std::pair<std::string, int>>& landmarks, const std::string& what, FaceRig* rig) {
+  const int face = rig->part_names.empty() ? -1 : rig->PartIndex("face");
+  std::map<int, int> rig_vertex;
+  auto on_chart = [&](int v) { return face < 0 || rig->vertex_part[v] == face; };
+  for (int v = 0; v < rig->num_vertices(); ++v) {
+    auto [it, added] = rig_vertex.emplace(rig->original_vertex[v], v);
+    if (!added && !on_chart(it->second) && on_chart(v)) it->second = v;
+  }
+  for (const auto& [name, id] : landmarks) {
+    auto it = rig_vertex.find(id);
+    Require(it != rig_vertex.end(), fmt::format("{}: landmark '{}' is OBJ vertex {}, which is not in the face region",
+                                                what, name, id));
+    rig->landmarks.push_back({name, it->second});
+  }
+}
+
+void AddLandmarks(const std::vector<int>& ids, const std::string& what, FaceRig* rig) {
+  Require(ids.size() == 68, fmt::format("{}: a list of landmarks must hold the 68 iBUG vertex ids, has {}", what,
+                                        ids.size()));
+  const auto names = IbugLandmarkNames();
+  std::vector<std::pair<std::string, int>> lms;
+  for (size_t i = 0; i < ids.size(); ++i) lms.emplace_back(names[i], ids[i]);
+  AddLandmarks(lms, what, rig);
+}
+
 }  // namespace
 
 FaceRig ImportObjRig(const fs::path& folder, const RigImportOptions& options, RigImportReport* report) {
@@ -149,6 +332,9 @@ FaceRig ImportObjRig(const fs::path& folder, const RigImportOptions& options, Ri
   }
   std::sort(identity.begin(), identity.end(), [](auto& a, auto& b) { return a.name < b.name; });
   std::sort(expressions.begin(), expressions.end(), [](auto& a, auto& b) { return a.name < b.name; });
+  if (options.max_identity_modes >= 0 && static_cast<int>(identity.size()) > options.max_identity_modes) {
+    identity.resize(static_cast<size_t>(options.max_identity_modes));
+  }
 
   // 2. The neutral defines topology, seams and the face region.
   const PolygonMesh neutral_poly = ReadObjPolygons(neutral_path);
@@ -159,7 +345,22 @@ FaceRig ImportObjRig(const fs::path& folder, const RigImportOptions& options, Ri
   const int n_orig = static_cast<int>(neutral_poly.positions.rows());
   rep.original_vertices = n_orig;
   std::vector<char> in_region(n_orig, 0);
-  if (!options.face_vertices.empty()) {
+  std::vector<int> part_of_original;  // parts mode: OBJ vertex id → index in options.parts, -1 = none
+  if (!options.parts.empty()) {
+    part_of_original.assign(n_orig, -1);
+    for (size_t p = 0; p < options.parts.size(); ++p) {
+      for (const VertexRange& r : options.parts[p].ranges) {
+        Require(r.end <= n_orig, fmt::format("part '{}': vertex range [{}, {}) exceeds the {} vertices of {}",
+                                             options.parts[p].name, r.first, r.end, n_orig, neutral_path.string()));
+        for (int v = r.first; v < r.end; ++v) {
+          Require(part_of_original[v] < 0, fmt::format("vertex {} is in two parts ('{}' and '{}')", v,
+                                                       options.parts[part_of_original[v]].name, options.parts[p].name));
+          part_of_original[v] = static_cast<int>(p);
+          in_region[v] = 1;
+        }
+      }
+    }
+  } else if (!options.face_vertices.empty()) {
     for (int v : options.face_vertices) {
       Require(v >= 0 && v < n_orig, fmt::format("face vertex id {} is out of range: {} has {} vertices",
                                                 v, neutral_path.string(), n_orig));
@@ -181,8 +382,9 @@ FaceRig ImportObjRig(const fs::path& folder, const RigImportOptions& options, Ri
   FaceRig rig;
   rig.neutral = tm.mesh;
   rig.neutral.V *= options.units_to_mm;
-  if (options.flip_v) rig.neutral.UV.col(1) = (1.0 - rig.neutral.UV.col(1).array()).matrix();
   rig.original_vertex = tm.original_vertex;
+  if (!options.parts.empty()) AssignParts(options.parts, part_of_original, &rig, &rep);
+  if (options.flip_v) rig.neutral.UV.col(1) = (1.0 - rig.neutral.UV.col(1).array()).matrix();
   rig.source = fmt::format("imported from {} ({} OBJ files, units x{} to mm)", folder.string(),
                            1 + identity.size() + expressions.size(), options.units_to_mm);
 
@@ -215,7 +417,9 @@ FaceRig ImportObjRig(const fs::path& folder, const RigImportOptions& options, Ri
 
   // 4. Landmarks (OBJ vertex ids → the first rig vertex carrying that id).
   const fs::path lm_path = folder / "landmarks.json";
-  if (fs::exists(lm_path)) {
+  if (!options.landmark_ids.empty()) {
+    AddLandmarks(options.landmark_ids, "--landmarks", &rig);
+  } else if (fs::exists(lm_path)) {
     const nlohmann::json j = ReadJsonFile(lm_path);
     std::vector<std::pair<std::string, int>> lms;
     if (j.is_array()) {
@@ -234,15 +438,7 @@ FaceRig ImportObjRig(const fs::path& folder, const RigImportOptions& options, Ri
     } else {
       throw Error(fmt::format("{}: expected an object {{name: vertex id}} or a list of 68 ids", lm_path.string()));
     }
-    std::map<int, int> first_rig_vertex;
-    for (int v = nv - 1; v >= 0; --v) first_rig_vertex[rig.original_vertex[v]] = v;
-    for (const auto& [name, id] : lms) {
-      auto it = first_rig_vertex.find(id);
-      Require(it != first_rig_vertex.end(),
-              fmt::format("{}: landmark '{}' is OBJ vertex {}, which is not in the face region",
-                          lm_path.string(), name, id));
-      rig.landmarks.push_back({name, it->second});
-    }
+    AddLandmarks(lms, lm_path.string(), &rig);
   } else {
     rep.warnings.push_back("no landmarks.json: the rig has no landmarks (the tracker needs the 68 iBUG landmarks)");
   }

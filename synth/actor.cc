@@ -95,12 +95,27 @@ Actor GenerateActor(const FaceRig& rig, uint64_t seed, const ActorOptions& optio
   return actor;
 }
 
-cv::Mat ChartRimFade(const FaceRig& rig, int size, double mm_per_uv, double width_mm) {
+namespace {
+
+// `covered` (CV_8U, 0/255) with its holes (uncovered texels not connected to the
+// map's border) filled.
+cv::Mat FillHoles(const cv::Mat& covered) {
+  cv::Mat padded;
+  cv::copyMakeBorder(covered, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, 0);
+  cv::floodFill(padded, cv::Point(0, 0), 128);  // the outside
+  cv::Mat filled = padded(cv::Rect(1, 1, covered.cols, covered.rows)) != 128;
+  return filled;
+}
+
+}  // namespace
+
+cv::Mat ChartRimFade(const FaceRig& rig, int size, double mm_per_uv, double width_mm, bool outer_rim_only) {
   TriMesh chart;
   chart.V = rig.neutral.V;
   chart.UV = rig.neutral.UV;
   chart.F = FaceChartTriangles(rig);
-  const cv::Mat covered = CoverageMask(RasterizeUv(chart, size, size, "ChartRimFade: the rig's face chart"));
+  cv::Mat covered = CoverageMask(RasterizeUv(chart, size, size, "ChartRimFade: the rig's face chart"));
+  if (outer_rim_only) covered = FillHoles(covered);
   cv::Mat texels;
   cv::distanceTransform(covered, texels, cv::DIST_L2, cv::DIST_MASK_PRECISE);
   cv::Mat fade(size, size, CV_32F);

@@ -110,8 +110,9 @@ cv::Mat BuildStaticShapeMap(const FaceAnchors& anchors, const StaticShapeParams&
 
 // CV_32F size² weight in the rig's UV layout: 0 on and outside the face chart's
 // rim, rising smoothly (smoothstep) to 1 at `width_mm` inside it (UV distance ×
-// mm_per_uv).
-cv::Mat ChartRimFade(const FaceRig& rig, int size, double mm_per_uv, double width_mm);
+// mm_per_uv). With `outer_rim_only`, holes in the chart (eyes and mouth of a chart
+// that leaves them open, as ICT-FaceKit's does) are not rim.
+cv::Mat ChartRimFade(const FaceRig& rig, int size, double mm_per_uv, double width_mm, bool outer_rim_only = false);
 inline constexpr double kStaticShapeRimFadeMm = 10.0;
 
 // Ground truth of one frame, per layer.

@@ -13,6 +13,16 @@
 namespace crease {
 namespace {
 
+// Brow stroke: centre line below the brow landmarks, half height at the outer
+// and inner ends, mm.
+constexpr double kBrowDropMm = 2.5;
+constexpr double kBrowHalfOuterMm = 1.4;
+constexpr double kBrowHalfInnerMm = 4.0;
+
+}  // namespace
+
+namespace {
+
 using Vec2 = Eigen::Vector2d;
 
 // Zero mean, unit RMS (in place).
@@ -216,12 +226,12 @@ SkinMaps BuildSkinMaps(const FaceRig& rig, const FaceAnchors& a, const SkinParam
   const cv::Mat cheeks = SoftRegionWeight(rig, {"left_cheek", "right_cheek"}, size, 8.0, a.mm_per_uv);
   const cv::Mat tzone = SoftRegionWeight(rig, {"forehead", "glabella", "nose", "chin"}, size, 5.0, a.mm_per_uv);
   const cv::Mat lips = LipMask(a, size, 1.5 / mm_per_texel);
-  // Brows: soft strokes along the brow landmarks (outer → inner), slightly
-  // below them, thin at the outer end and ~4 mm thick at the inner end.
+  // Brows: soft strokes below the brow landmarks (which trace a brow's upper
+  // edge in iBUG 300-W), ~3 mm tall at the outer end and ~8 mm at the inner end.
   cv::Mat brows(size, size, CV_32F, cv::Scalar(0));
   for (int k = 0; k < 2; ++k) {
     std::vector<Vec2> pts;
-    for (const auto& b : a.brow[k]) pts.push_back(b - a.up * (1.0 / a.mm_per_uv));
+    for (const auto& b : a.brow[k]) pts.push_back(b - a.up * (kBrowDropMm / a.mm_per_uv));
     if (pts.size() < 2) continue;
     std::vector<double> arc(pts.size(), 0.0);
     for (size_t b = 1; b < pts.size(); ++b) arc[b] = arc[b - 1] + (pts[b] - pts[b - 1]).norm();
@@ -231,7 +241,7 @@ SkinMaps BuildSkinMaps(const FaceRig& rig, const FaceAnchors& a, const SkinParam
       lo = lo.cwiseMin(q);
       hi = hi.cwiseMax(q);
     }
-    const double reach = 4.0 / a.mm_per_uv;
+    const double reach = (kBrowHalfInnerMm + 1.0) / a.mm_per_uv;
     const int i0 = std::max(0, static_cast<int>((lo.x() - reach) * size));
     const int i1 = std::min(size - 1, static_cast<int>((hi.x() + reach) * size) + 1);
     const int j0 = std::max(0, static_cast<int>((lo.y() - reach) * size));
@@ -250,7 +260,7 @@ SkinMaps BuildSkinMaps(const FaceRig& rig, const FaceAnchors& a, const SkinParam
           }
         }
         const double t = best_arc / arc.back();  // 0 outer, 1 inner
-        const double half = 0.8 + 1.4 * t;         // mm
+        const double half = kBrowHalfOuterMm + (kBrowHalfInnerMm - kBrowHalfOuterMm) * t;  // mm
         const double d_mm = best * a.mm_per_uv;
         const double v = (1.0 - SmoothStep(half - 0.5, half + 0.5, d_mm)) * SmoothStep(0.0, 0.15, t);
         brows.at<float>(j, i) = std::max(brows.at<float>(j, i), static_cast<float>(v));

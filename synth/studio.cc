@@ -8,6 +8,7 @@
 #include <set>
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
 #include "core/file_util.h"
@@ -75,7 +76,7 @@ namespace {
 // shape fades out towards the rim (synth/actor.cc), so the hi-res face stays
 // outside the shallow underlay there.
 constexpr double kUnderlayDepthMm = 3.0;
-constexpr double kUnderlayRimDepthMm = 0.05;
+constexpr double kUnderlayRimDepthMm = 0.0;
 constexpr double kUnderlayDepthSlope = 0.3;  // mm of depth per mm from the rim
 constexpr double kSkinRimBlendMm = 8.0;      // the face's skin maps blend into the parts' material
 
@@ -85,7 +86,11 @@ Material PartMaterial(const std::string& name, const Eigen::Vector3f& skin_tone)
   Material m = MaterialPreset("skin");
   m.textured = false;
   m.albedo = skin_tone;
-  if (has("pupil")) {
+  if (has("lash")) {  // eyelash strips (ICT-FaceKit)
+    m.albedo = {0.02f, 0.014f, 0.01f};
+    m.specular = 0.3f;
+    m.roughness = 0.5f;
+  } else if (has("pupil")) {
     m.albedo = {0.01f, 0.01f, 0.012f};
     m.specular = 1.0f;
     m.roughness = 0.1f;
@@ -93,6 +98,14 @@ Material PartMaterial(const std::string& name, const Eigen::Vector3f& skin_tone)
     m.albedo = {0.12f, 0.07f, 0.03f};
     m.specular = 1.0f;
     m.roughness = 0.1f;
+  } else if (has("socket")) {  // the flesh behind the eyeballs (ICT-FaceKit)
+    m.albedo = {0.16f, 0.05f, 0.045f};
+    m.specular = 0.6f;
+    m.roughness = 0.3f;
+  } else if (has("gums") || has("tongue")) {
+    m.albedo = {0.32f, 0.06f, 0.065f};
+    m.specular = 0.8f;
+    m.roughness = 0.25f;
   } else if (has("eye")) {  // eyeballs: sclera
     m.albedo = {0.62f, 0.58f, 0.55f};
     m.specular = 1.0f;
@@ -108,6 +121,30 @@ Material PartMaterial(const std::string& name, const Eigen::Vector3f& skin_tone)
     m.roughness = 0.5f;
   }
   return m;
+}
+
+// Texture padding: texels outside the chart (`inside` = 0) take the mean of their
+// covered neighbours, one ring per pass, so that bilinear lookups at the chart's
+// edge (the hi-res surface's last texels, the underlay) do not mix in black.
+void PadOutsideChart(const cv::Mat& inside, int rings, const std::vector<cv::Mat*>& maps) {
+  cv::Mat mask;
+  inside.convertTo(mask, CV_32F, 1.0 / 255.0);
+  for (int r = 0; r < rings; ++r) {
+    cv::Mat count;
+    cv::boxFilter(mask, count, -1, cv::Size(3, 3), cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+    const cv::Mat ring = (mask == 0.0f) & (count > 0.0f);
+    for (cv::Mat* map : maps) {
+      std::vector<cv::Mat> masks(static_cast<size_t>(map->channels()), mask), counts(masks.size(), count);
+      cv::Mat m, c, sum;
+      cv::merge(masks, m);
+      cv::merge(counts, c);
+      cv::boxFilter(map->mul(m), sum, -1, cv::Size(3, 3), cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+      cv::Mat mean;
+      cv::divide(sum, c, mean);
+      mean.copyTo(*map, ring);
+    }
+    mask.setTo(1.0f, ring);
+  }
 }
 
 }  // namespace
@@ -256,7 +293,7 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
     // it meets (the mean albedo, the nominal specular and roughness), so the seam
     // shows no change of colour or sheen.
     const int size = materials.albedo.rows;
-    const cv::Mat fade = ChartRimFade(rig, size, model_->anchors().mm_per_uv, kSkinRimBlendMm);
+    const cv::Mat fade = ChartRimFade(rig, size, model_->anchors().mm_per_uv, kSkinRimBlendMm, /*outer_rim_only=*/true);
     const float nominal_roughness = MaterialPreset("skin").roughness;
     for (int j = 0; j < size; ++j) {
       for (int i = 0; i < size; ++i) {
@@ -271,6 +308,7 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
         ro = w * ro + (1.0f - w) * nominal_roughness;
       }
     }
+    PadOutsideChart(red > 0, 4, {&materials.albedo, &materials.specular, &materials.roughness});
   }
   Material face = MaterialPreset("skin");
   face.textured = true;

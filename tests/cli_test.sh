@@ -117,7 +117,8 @@ bad "unknown extension" "supported" "$crease" mesh convert "$tmp/e.ply" "$tmp/e.
 [ ! -e "$tmp/e.xyz" ] || { echo "FAIL: half-written output"; fails=$((fails+1)); }
 bad "missing rig folder" "not a folder" "$crease" rig import --objs "$tmp/none" --units cm --out "$tmp/x.crig"
 bad "bad units" "units" "$crease" rig import --objs "$data/sample_rig" --units furlong --out "$tmp/x.crig"
-bad "bad face range" "FIRST:LAST" "$crease" rig import --objs "$data/sample_rig" --units cm --face-vertices 12 --out "$tmp/x.crig"
+bad "bad face range" "[A, B)" "$crease" rig import --objs "$data/sample_rig" --units cm --face-vertices 12 --out "$tmp/x.crig"
+bad "ambiguous face range" "B included" "$crease" rig import --objs "$data/sample_rig" --units cm --face-vertices 0:12 --out "$tmp/x.crig"
 [ ! -e "$tmp/x.crig" ] || { echo "FAIL: rig written despite an error"; fails=$((fails+1)); }
 bad "not a rig" "not a crease rig" "$crease" rig info "$tmp/e.ply"
 bad "unknown expression" "no expression named 'smile'" "$crease" rig evaluate "$tmp/r.crig" -e smile=1 -o "$tmp/y.ply"

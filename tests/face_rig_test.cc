@@ -7,9 +7,11 @@
 #include <filesystem>
 #include <fstream>
 #include <set>
+#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
 #include "core/error.h"
+#include "core/json_io.h"
 #include "core/mesh_primitives.h"
 #include "core/rig_import.h"
 
@@ -103,11 +105,11 @@ TEST(FaceRig, MalformedFilesGiveNamedErrors) {
   const fs::path magic = dir / "magic.crig";
   std::ofstream(magic, std::ios::binary) << "PLY nonsense";
   EXPECT_NE(ErrorOf([&] { ReadRig(magic); }).find("not a crease rig"), std::string::npos);
-  std::string v2 = bytes;
-  v2[8] = 2;
+  std::string v3 = bytes;
+  v3[8] = 3;
   const fs::path version = dir / "version.crig";
-  std::ofstream(version, std::ios::binary) << v2;
-  EXPECT_NE(ErrorOf([&] { ReadRig(version); }).find("version 2 is not supported"), std::string::npos);
+  std::ofstream(version, std::ios::binary) << v3;
+  EXPECT_NE(ErrorOf([&] { ReadRig(version); }).find("version 3 is not supported"), std::string::npos);
   EXPECT_NE(ErrorOf([&] { ReadRig(dir / "absent.crig"); }).find("file does not exist"), std::string::npos);
 
   FaceRig bad = SmallRig();
@@ -121,6 +123,100 @@ TEST(FaceRig, MalformedFilesGiveNamedErrors) {
   bad = SmallRig();
   bad.neutral.UV.resize(0, 2);
   EXPECT_NE(ErrorOf([&] { bad.Validate("r"); }).find("no UV coordinates"), std::string::npos);
+}
+
+TEST(FaceRig, CompactFileKeepsDeltasWithinHalfAStep) {
+  FaceRig rig = SmallRig();
+  rig.expression_basis.col(1).setZero();  // a sparse shape, as most expressions are
+  rig.identity_basis *= 20.0f;            // ±20 mm
+  const fs::path dir = TestDir();
+  WriteRig(dir / "raw.crig", rig);
+  RigWriteOptions compact;
+  compact.compact = true;
+  WriteRig(dir / "compact.crig", rig, compact);
+  const FaceRig back = ReadRig(dir / "compact.crig");
+  EXPECT_EQ(back.neutral.V, rig.neutral.V);
+  EXPECT_EQ(back.neutral.F, rig.neutral.F);
+  EXPECT_EQ(back.neutral.UV, rig.neutral.UV);
+  EXPECT_EQ(back.vertex_part, rig.vertex_part);
+  EXPECT_LE((back.identity_basis - rig.identity_basis).cwiseAbs().maxCoeff(), 0.5 * compact.quantum_mm + 1e-6);
+  EXPECT_LE((back.expression_basis - rig.expression_basis).cwiseAbs().maxCoeff(), 0.5 * compact.quantum_mm + 1e-6);
+  EXPECT_EQ(back.expression_basis.col(1).cwiseAbs().maxCoeff(), 0.0f);
+  EXPECT_LT(fs::file_size(dir / "compact.crig"), fs::file_size(dir / "raw.crig"));
+  // A basis beyond ±32767 steps gets a coarser step instead of overflowing.
+  rig.expression_basis(0, 0) = 400.0f;
+  WriteRig(dir / "big.crig", rig, compact);
+  EXPECT_NEAR(ReadRig(dir / "big.crig").expression_basis(0, 0), 400.0f, 0.01f);
+
+  // Corrupt compressed data is an error naming the file and the array.
+  std::string bytes;
+  {
+    std::ifstream in(dir / "compact.crig", std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  bytes[bytes.size() - 200] ^= 0x55;
+  bytes[bytes.size() - 201] ^= 0x55;
+  WriteText(dir / "corrupt.crig", bytes);
+  EXPECT_ERROR_HAS(ReadRig(dir / "corrupt.crig"), "corrupt.crig: array");
+}
+
+TEST(RigImport, VertexRangesAreUnambiguous) {
+  VertexRange r = ParseVertexRange("[0, 9408]", "t");
+  EXPECT_EQ(r.first, 0);
+  EXPECT_EQ(r.end, 9409);
+  r = ParseVertexRange("[9409,11248)", "t");
+  EXPECT_EQ(r.first, 9409);
+  EXPECT_EQ(r.end, 11248);
+  EXPECT_ERROR_HAS(ParseVertexRange("0:9409", "--face-vertices"), "--face-vertices: vertex range '0:9409' must be");
+  EXPECT_ERROR_HAS(ParseVertexRange("[5, 5)", "t"), "is empty");
+  EXPECT_EQ(ParseLandmarkIds("1225, 1888,1052 367").size(), 4u);
+  EXPECT_ERROR_HAS(ParseLandmarkIds("12, x"), "unexpected 'x'");
+}
+
+TEST(RigImport, MultiPartHeadKeepsEveryPartOnItsOwnUvTile) {
+  const fs::path dir = TestDir() / "rig";
+  fs::copy(kSampleRig, dir, fs::copy_options::recursive);
+  const fs::path parts = dir.parent_path() / "parts.json";
+  // The upper 27 rows are the face; the rest a second part; the grid's last row is in no part.
+  WriteText(parts, R"J([{"name": "face", "vertices": "[0, 1107)"}, {"name": "neck", "vertices": ["[1107, 2132)"]}])J");
+  RigImportOptions opt;
+  opt.parts = ReadRigParts(parts);
+  // ICT-FaceKit's form of the landmark list: vertex_indices.json's idx_to_landmark_verts.
+  const nlohmann::json lms = ReadJsonFile(dir / "landmarks.json");
+  WriteText(dir.parent_path() / "vertex_indices.json", nlohmann::json{{"idx_to_landmark_verts", lms}}.dump());
+  opt.landmark_ids = ParseLandmarkIds((dir.parent_path() / "vertex_indices.json").string());
+  RigImportReport report;
+  const FaceRig rig = ImportObjRig(dir, opt, &report);
+  ASSERT_EQ(rig.part_names, (std::vector<std::string>{"face", "neck"}));
+  EXPECT_EQ(report.dropped_triangles, 2 * 40);  // the polygons touching the last row
+  EXPECT_EQ(rig.neutral.num_faces(), 2 * 40 * 51);
+  EXPECT_EQ(FaceChartTriangles(rig).rows(), 2 * 40 * 26);
+  for (int v = 0; v < rig.num_vertices(); ++v) {
+    const bool face = rig.vertex_part[v] == 0;
+    EXPECT_EQ(face, rig.original_vertex[v] < 1107);
+    if (face) {
+      EXPECT_LE(rig.neutral.UV(v, 0), 1.0);
+    } else {
+      EXPECT_GE(rig.neutral.UV(v, 0), 3.0);  // part 1's tile, u in [3, 4)
+      EXPECT_LT(rig.neutral.UV(v, 0), 4.0);
+    }
+  }
+  ASSERT_EQ(rig.landmarks.size(), 68u);
+  EXPECT_EQ(rig.original_vertex[rig.landmarks[0].vertex], lms[0].get<int>());
+  EXPECT_EQ(report.part_vertices.size(), 2u);
+
+  // Bad parts files name the file and the problem.
+  WriteText(parts, R"J([{"name": "face", "vertices": "[0, 100]"}, {"name": "neck", "vertices": "[100, 200]"}])J");
+  EXPECT_ERROR_HAS(ReadRigParts(parts), "parts 'face' and 'neck' overlap");
+  WriteText(parts, R"J([{"name": "neck", "vertices": "[0, 100]"}])J");
+  EXPECT_ERROR_HAS(ReadRigParts(parts), "no part is named \"face\"");
+  WriteText(parts, R"J([{"name": "face", "vertices": "[0, 100]", "colour": 1}])J");
+  EXPECT_ERROR_HAS(ReadRigParts(parts), "unknown key 'colour'");
+  WriteText(parts, R"J([{"name": "face", "vertices": "0:100"}])J");
+  EXPECT_ERROR_HAS(ReadRigParts(parts), "parts.json: part 0 ('face'): vertex range '0:100'");
+  WriteText(parts, R"J([{"name": "face", "vertices": "[0, 99999]"}])J");
+  opt.parts = ReadRigParts(parts);
+  EXPECT_ERROR_HAS(ImportObjRig(dir, opt), "exceeds the 2173 vertices");
 }
 
 TEST(RigImport, SampleObjFolder) {

@@ -380,7 +380,10 @@ std::string CubeObj(bool with_uv) {
   for (int i = 0; i < 8; ++i) obj << "v " << (i & 1) << " " << ((i >> 1) & 1) << " " << ((i >> 2) & 1) << "\n";
   const int faces[6][4] = {{1, 3, 4, 2}, {5, 6, 8, 7}, {1, 2, 6, 5},
                            {3, 7, 8, 4}, {1, 5, 7, 3}, {2, 4, 8, 6}};
-  for (int f = 0; f < 6 && with_uv; ++f) obj << "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n";
+  // Each face on a UV tile of its own (u in [f, f + 1]), so every corner is a seam.
+  for (int f = 0; f < 6 && with_uv; ++f) {
+    obj << "vt " << f << " 0\nvt " << f + 1 << " 0\nvt " << f + 1 << " 1\nvt " << f << " 1\n";
+  }
   for (int f = 0; f < 6; ++f) {
     obj << "f";
     for (int k = 0; k < 4; ++k) {
@@ -418,6 +421,18 @@ TEST(Obj, CubeSeamsSplitEveryCorner) {
   EXPECT_EQ(stats.boundary, 0);
   EXPECT_EQ(stats.non_manifold, 0);
   EXPECT_NEAR(TriangleAreas(cube).sum(), 6.0, 1e-12);
+}
+
+TEST(Obj, RepeatedTextureCoordinatesAreNotASeam) {
+  // Two triangles sharing an edge whose "vt" lines repeat the same coordinates
+  // under new indices (as exporters write them): one chart, no split.
+  const fs::path path = TestDir() / "repeated_vt.obj";
+  WriteText(path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\n"
+                  "vt 0 0\nvt 1 0\nvt 0 1\nvt 1 0\nvt 1 1\nvt 0 1\n"
+                  "f 1/1 2/2 3/3\nf 2/4 4/5 3/6\n");
+  const TriangulatedMesh split = TriangulateAndSplitSeams(ReadObjPolygons(path), path.string());
+  EXPECT_EQ(split.mesh.num_vertices(), 4);
+  EXPECT_EQ(ComputeEdgeStats(split.mesh).boundary, 4);
 }
 
 TEST(Obj, MalformedFilesNameFileLineAndProblem) {

@@ -99,15 +99,27 @@ void AddRigCommands(CLI::App& app) {
   // rig import
   {
     auto* cmd = rig_cmd->add_subcommand("import", "Import a blendshape OBJ folder into a crease rig (.crig)");
-    static std::string objs, units, face_range, face_mask, out;
+    static std::string objs, units, face_range, face_mask, parts, landmarks, out;
     static RigImportOptions opt;
+    static RigWriteOptions write;
     static bool keep_v = false;
     cmd->add_option("--objs", objs, "Folder: neutral.obj, expressions/*.obj or NAME.obj, identity/*.obj or "
                                     "identityNNN.obj, optional landmarks.json and regions/*.png")
         ->required();
     cmd->add_option("--units", units, "Units of the OBJ coordinates")->required()->check(CLI::IsMember({"mm", "cm", "m"}));
-    cmd->add_option("--face-vertices", face_range, "Face region as a half-open OBJ vertex range FIRST:LAST");
+    cmd->add_option("--face-vertices", face_range,
+                    "Face region as an OBJ vertex range: \"[A, B]\" includes B (ICT-FaceKit's tables), \"[A, B)\" excludes it");
     cmd->add_option("--face-mask", face_mask, "Face region as a JSON list of OBJ vertex ids");
+    cmd->add_option("--parts", parts,
+                    "A whole multi-part head: JSON list of {\"name\", \"vertices\": \"[A, B]\"}, one part \"face\" "
+                    "(the UV chart); e.g. data/ict/ict_parts.json");
+    cmd->add_option("--landmarks", landmarks,
+                    "The 68 iBUG landmark OBJ vertex ids: \"1225,1888,...\", a text file of them, a JSON list, or "
+                    "ICT-FaceKit's vertex_indices.json (idx_to_landmark_verts); overrides landmarks.json");
+    cmd->add_option("--identity-modes", opt.max_identity_modes, "Keep only the first N identity modes (-1: all)")
+        ->capture_default_str();
+    cmd->add_flag("--compact", write.compact,
+                  "Compact file: deltas quantised to 5 um in 16 bits, arrays zlib-compressed (format version 2)");
     cmd->add_option("--region-size", opt.region_mask_size, "Region mask resolution")->capture_default_str();
     cmd->add_flag("--keep-v", keep_v, "Do not flip v (the OBJ's v already grows downwards)");
     cmd->add_option("--out,-o", out, "Output rig file (.crig)")->required();
@@ -115,15 +127,12 @@ void AddRigCommands(CLI::App& app) {
       opt.units_to_mm = UnitsToMm(units);
       opt.flip_v = !keep_v;
       if (!face_range.empty()) {
-        const auto colon = face_range.find(':');
-        try {
-          if (colon == std::string::npos) throw std::invalid_argument("no colon");
-          opt.face_first = std::stoi(face_range.substr(0, colon));
-          opt.face_last = std::stoi(face_range.substr(colon + 1));
-        } catch (const std::exception&) {
-          throw Error(fmt::format("--face-vertices '{}': expected FIRST:LAST, e.g. 0:9409", face_range));
-        }
+        const VertexRange r = ParseVertexRange(face_range, "--face-vertices");
+        opt.face_first = r.first;
+        opt.face_last = r.end;
       }
+      if (!parts.empty()) opt.parts = ReadRigParts(parts);
+      if (!landmarks.empty()) opt.landmark_ids = ParseLandmarkIds(landmarks);
       if (!face_mask.empty()) {
         const nlohmann::json j = ReadJsonFile(face_mask);
         if (!j.is_array()) throw Error(fmt::format("{}: expected a JSON list of vertex ids", face_mask));
@@ -162,8 +171,9 @@ void AddRigCommands(CLI::App& app) {
           std::printf("region '%s' from %s\n", name.c_str(), e.path().string().c_str());
         }
       }
-      WriteRig(out, rig);
+      WriteRig(out, rig, write);
       for (const auto& w : report.warnings) std::printf("warning: %s\n", w.c_str());
+      for (const auto& [name, n] : report.part_vertices) std::printf("part %-22s %6d vertices\n", name.c_str(), n);
       std::printf("imported %d OBJ files from %s: %d of %d vertices in the face region, %d seam splits, "
                   "%d triangles dropped\n",
                   report.obj_files, objs.c_str(), report.face_region_vertices, report.original_vertices,

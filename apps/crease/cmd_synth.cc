@@ -9,6 +9,7 @@
 #include "core/face_rig.h"
 #include "core/image_io.h"
 #include "core/preview_render.h"
+#include "synth/ict_head.h"
 #include "synth/procedural_rig.h"
 
 namespace crease::app {
@@ -61,18 +62,33 @@ void AddSynthCommands(CLI::App& app) {
 
   // synth rig
   {
-    auto* cmd = synth->add_subcommand("rig", "Build the studio's procedural head rig (.crig)");
-    static std::string out, preview;
+    auto* cmd = synth->add_subcommand("rig", "Build a studio head rig (.crig): the realistic ICT-FaceKit head or "
+                                             "the procedural one");
+    static std::string out, preview, head = "procedural", from;
     static std::vector<std::string> sets;
     static int preview_tile = 512;
     cmd->add_option("--out,-o", out, "Output rig file (.crig)")->required();
-    cmd->add_option("--set", sets, "Rig option KEY=VALUE (repeatable), e.g. face_columns=72");
+    cmd->add_option("--head", head, "ict: the ICT-FaceKit head (synth/ict_head.h); procedural: the SDF head")
+        ->check(CLI::IsMember({"ict", "procedural"}))
+        ->capture_default_str();
+    cmd->add_option("--from", from, "With --head ict: the imported ICT rig (default: the vendored "
+                                    "data/ict/ict_face_light.crig)");
+    cmd->add_option("--set", sets, "Rig option KEY=VALUE (repeatable), e.g. face_columns=72 (procedural), "
+                                   "identity_modes=40 (ict)");
     cmd->add_option("--preview", preview, "Also write a contact sheet of renders (neutral and expressions)");
     cmd->add_option("--preview-tile", preview_tile, "Preview tile size, pixels")->capture_default_str();
     cmd->callback([] {
-      ProceduralRigOptions opt;
-      if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &opt);
-      const FaceRig rig = BuildProceduralRig(opt);
+      FaceRig rig;
+      if (head == "ict") {
+        IctHeadOptions opt;
+        if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &opt);
+        rig = BuildIctStudioRig(ReadRig(from.empty() ? VendoredIctRigPath() : std::filesystem::path(from)), opt);
+      } else {
+        Require(from.empty(), "--from is for --head ict");
+        ProceduralRigOptions opt;
+        if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &opt);
+        rig = BuildProceduralRig(opt);
+      }
       WriteRig(out, rig);
       const ChartDistortion d = MeasureFaceChartDistortion(rig);
       std::printf("wrote %s: %d vertices, %d triangles, %d identity modes, %d expressions, %zu landmarks, "
