@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include <Eigen/Geometry>
+#include <Eigen/QR>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
@@ -277,6 +278,44 @@ fs::path TruthMapPath(const fs::path& dataset, const json& info, int frame) {
   return dataset / fmt::format(fmt::runtime(pattern), fmt::arg("frame", frame));
 }
 
+// The prior error of a tracking rig: the best fit of its linear model
+// V0 + Iα + Bβ to a true coarse mesh of the same topology (head frame), over the
+// face-chart vertices, by unconstrained least squares in (α, β). With weights
+// unbounded this is a lower bound of what any tracker using that rig can reach:
+// the part of the truth the rig cannot represent (issue 15).
+class RigPriorFit {
+ public:
+  RigPriorFit(const FaceRig& rig, const std::vector<int>& ids) : rig_(rig), ids_(ids) {
+    const int ni = rig.num_identity(), ne = rig.num_expressions();
+    Eigen::MatrixXd A(3 * static_cast<Eigen::Index>(ids.size()), ni + ne);
+    for (size_t r = 0; r < ids.size(); ++r) {
+      for (int k = 0; k < 3; ++k) {
+        const Eigen::Index row = 3 * static_cast<Eigen::Index>(r) + k, src = 3 * ids[r] + k;
+        if (ni > 0) A.row(row).head(ni) = rig.identity_basis.row(src).cast<double>();
+        if (ne > 0) A.row(row).tail(ne) = rig.expression_basis.row(src).cast<double>();
+      }
+    }
+    A_ = A;
+    qr_.compute(A_);
+  }
+  // The fitted positions of every vertex of `truth_head` (#V×3, head frame).
+  MatX3d Fit(const MatX3d& truth_head) const {
+    Eigen::VectorXd r(3 * static_cast<Eigen::Index>(ids_.size()));
+    for (size_t i = 0; i < ids_.size(); ++i) {
+      r.segment<3>(3 * static_cast<Eigen::Index>(i)) = (truth_head.row(ids_[i]) - rig_.neutral.V.row(ids_[i])).transpose();
+    }
+    const Eigen::VectorXd x = A_.cols() > 0 ? Eigen::VectorXd(qr_.solve(r)) : Eigen::VectorXd();
+    const int ni = rig_.num_identity();
+    return rig_.EvaluatePositions(x.head(ni), x.tail(x.size() - ni));
+  }
+
+ private:
+  const FaceRig& rig_;
+  std::vector<int> ids_;
+  Eigen::MatrixXd A_;
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr_;
+};
+
 }  // namespace
 
 CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& dataset,
@@ -317,11 +356,20 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   const cv::Mat offset_mask = ValidRegionMask(rig.regions, {options.offset_region}, R, coverage);
   const int offset_shift = static_cast<int>(std::lround(options.offset_search_mm / mm_per_texel));
 
+  // The truth moves with the actor's personal rig (its expression deviations),
+  // which the tracking rig (the capture's) cannot represent exactly.
+  const fs::path actor_path = dataset / "actor.json";
+  const std::optional<Actor> truth_actor =
+      fs::is_regular_file(actor_path) ? std::optional<Actor>(ReadActor(actor_path)) : std::nullopt;
+  const FaceRig truth_motion = truth_actor ? PersonalRig(truth_rig, *truth_actor) : truth_rig;
+  const RigPriorFit prior(rig, face_ids);
+
   std::optional<ActorModel> actor;
   std::unique_ptr<HifiMeshBuilder> hifi;
   cv::Mat meso;
   if (options.surface_every > 0) {
-    actor.emplace(truth_rig, ReadActor(dataset / "actor.json"));
+    Require(truth_actor.has_value(), fmt::format("{}: missing (needed for the surface metrics)", actor_path.string()));
+    actor.emplace(truth_rig, *truth_actor);
     HifiMeshOptions ho;
     ho.hifi_mesh_resolution = options.surface_mesh_resolution;
     hifi = std::make_unique<HifiMeshBuilder>(rig, ho);
@@ -368,8 +416,10 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     const FrameTruth truth = ReadFrameTruth(dataset, index, truth_rig.num_vertices());
     Eigen::VectorXd identity = truth.identity;
     if (identity.size() != truth_rig.num_identity()) identity.conservativeResize(truth_rig.num_identity());
-    const MatX3d true_cam =
-        Transform(truth.cam_from_head, truth_rig.EvaluatePositions(identity, ExpressionVector(truth_rig, truth.expression)));
+    const MatX3d true_head = truth_motion.EvaluatePositions(identity, ExpressionVector(truth_rig, truth.expression));
+    const MatX3d true_cam = Transform(truth.cam_from_head, true_head);
+    const MatX3d prior_cam = Transform(truth.cam_from_head, prior.Fit(true_head));
+    e.prior_mm = MeanDistance(prior_cam, true_cam, face_ids);
 
     // 2D and 3D vertex errors over the visible face-chart vertices.
     MatX2d err_c(rig.num_vertices(), 2), err_r(rig.num_vertices(), 2);
@@ -382,6 +432,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       const Eigen::RowVector2d t = truth.vertices.row(i);
       err_c.row(i) = cam.ProjectCamPoint(arrays.coarse.row(i).transpose()).transpose() - t;
       err_r.row(i) = cam.ProjectCamPoint(arrays.refined.row(i).transpose()).transpose() - t;
+      e.prior_px += (cam.ProjectCamPoint(prior_cam.row(i).transpose()).transpose() - t).norm();
       sc += err_c.row(i).norm();
       sr += err_r.row(i).norm();
       visible.push_back(i);
@@ -391,6 +442,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     if (!visible.empty()) {
       e.coarse_px = sc / visible.size();
       e.refined_px = sr / visible.size();
+      e.prior_px /= visible.size();
     }
     if (s.error_vectors.empty() && vectors_target >= 0 && index >= vectors_target && !visible.empty()) {
       std::string pattern = "frames/{frame:06d}.png";
@@ -534,6 +586,8 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     s.refined_mm += e.refined_mm;
     s.coarse_aligned_mm += e.coarse_aligned_mm;
     s.refined_aligned_mm += e.refined_aligned_mm;
+    s.prior_px += e.prior_px;
+    s.prior_mm += e.prior_mm;
     if (e.coarse_jitter_px > 0) {
       s.coarse_jitter_px += e.coarse_jitter_px;
       s.refined_jitter_px += e.refined_jitter_px;
@@ -561,6 +615,8 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     s.refined_mm /= n;
     s.coarse_aligned_mm /= n;
     s.refined_aligned_mm /= n;
+    s.prior_px /= n;
+    s.prior_mm /= n;
   }
   if (jitter_frames > 0) {
     s.coarse_jitter_px /= jitter_frames;
@@ -593,7 +649,9 @@ std::string CaptureEvalSummary::ToJson() const {
                    {"coarse_aligned_mm", coarse_aligned_mm},
                    {"refined_aligned_mm", refined_aligned_mm},
                    {"coarse_jitter_px", coarse_jitter_px},
-                   {"refined_jitter_px", refined_jitter_px}};
+                   {"refined_jitter_px", refined_jitter_px},
+                   {"prior_px", prior_px},
+                   {"prior_mm", prior_mm}};
   j["displacement"] = {{"frames", displacement_frames},
                        {"active_frames", active_frames},
                        {"face", ComparisonJson(d_face)},
@@ -632,6 +690,8 @@ std::string CaptureEvalSummary::ToJson() const {
       f["refined_aligned_mm"] = e.refined_aligned_mm;
       f["coarse_jitter_px"] = e.coarse_jitter_px;
       f["refined_jitter_px"] = e.refined_jitter_px;
+      f["prior_px"] = e.prior_px;
+      f["prior_mm"] = e.prior_mm;
       if (e.has_displacement) {
         f["displacement"] = {{"face", ComparisonJson(e.d_face)},
                              {"wrinkle_regions", ComparisonJson(e.d_wrinkle)},
@@ -694,6 +754,9 @@ std::string CaptureEvalSummary::ToMarkdown() const {
                    refined_aligned_mm);
   o << fmt::format("| jitter (frame-to-frame change of the 2D error), px | {:.3f} | {:.3f} |\n\n", coarse_jitter_px,
                    refined_jitter_px);
+  o << fmt::format("Prior error (the tracking rig's best least-squares fit to the true coarse mesh, the model error "
+                   "a blendshape prior cannot remove): {:.2f} px, {:.2f} mm\n\n",
+                   prior_px, prior_mm);
   if (displacement_frames > 0) {
     o << fmt::format("## Displacement D^t (paper Sec. 5.2): {} frames, {} with wrinkles (pooled below)\n\n",
                      displacement_frames, active_frames);

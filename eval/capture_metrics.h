@@ -91,6 +91,9 @@ struct FrameCaptureEval {
   double coarse_mm = 0, refined_mm = 0;          // 3D vertex error (camera frame)
   double coarse_aligned_mm = 0, refined_aligned_mm = 0;  // after rigid alignment
   double coarse_jitter_px = 0, refined_jitter_px = 0;    // vs the previous frame (0 on the first)
+  // Prior error: the tracking rig's best fit to the true coarse mesh (RigPriorFit),
+  // 2D over the visible face-chart vertices and 3D over all of them.
+  double prior_px = 0, prior_mm = 0;
   bool has_displacement = false;
   MapComparison d_face, d_wrinkle, d_face_band, d_wrinkle_band;
   double d_jitter_mm = 0;  // band, wrinkle regions
@@ -108,6 +111,7 @@ struct CaptureEvalSummary {
   int frames = 0, tracked = 0, displacement_frames = 0, surface_frames = 0;
   double coarse_px = 0, refined_px = 0, coarse_mm = 0, refined_mm = 0, coarse_aligned_mm = 0, refined_aligned_mm = 0;
   double coarse_jitter_px = 0, refined_jitter_px = 0;
+  double prior_px = 0, prior_mm = 0;  // the tracking rig's best fit to the truth (mean over tracked frames)
   // Displacement, pooled over the texels of the active frames (those whose true
   // wrinkle-band RMS in the wrinkle regions reaches active_reference_rms_mm: a
   // correlation or amplitude ratio of a frame without wrinkles means nothing).

@@ -28,7 +28,7 @@
 #include "pipeline/training/trainer.h"
 #include "synth/actor.h"
 #include "synth/dataset.h"
-#include "synth/procedural_rig.h"
+#include "synth/studio_rig.h"
 #include "synth/sequence.h"
 #include "synth/studio.h"
 
@@ -107,7 +107,7 @@ struct SectionInfo {
 
 const std::vector<SectionInfo>& Sections() {
   static const std::vector<SectionInfo> s = {
-      {"dataset", &ValidateAs<ExperimentDataset>, &DefaultsOf<ExperimentDataset>},     {"rig", &ValidateAs<ProceduralRigOptions>, &DefaultsOf<ProceduralRigOptions>},
+      {"dataset", &ValidateAs<ExperimentDataset>, &DefaultsOf<ExperimentDataset>},     {"rig", &ValidateAs<StudioRigOptions>, &DefaultsOf<StudioRigOptions>},
       {"actor", &ValidateAs<ActorOptions>, &DefaultsOf<ActorOptions>},            {"test_actor", &ValidateAs<ActorOptions>, &DefaultsOf<ActorOptions>},
       {"studio", &ValidateAs<StudioOptions>, &DefaultsOf<StudioOptions>},          {"training", &ValidateAs<TrainingOptions>, &DefaultsOf<TrainingOptions>},
       {"tracker", &ValidateAs<TrackerTrainingOptions>, &DefaultsOf<TrackerTrainingOptions>}, {"capture", &ValidateAs<CaptureOptions>, &DefaultsOf<CaptureOptions>},

@@ -4,7 +4,7 @@
 # after the build):
 #   1. imports the bundled blendshape OBJ folder (quads, cm, per-corner UVs with a
 #      seam, 68 landmarks) into a crease rig and ray-traces a preview;
-#   2. builds the studio's procedural head rig and a seeded actor, and renders a brow
+#   2. builds the studio's realistic head rig (ICT-FaceKit) and a seeded actor, and renders a brow
 #      raise under raking and under front light (the wrinkles show under the first);
 #   3. writes the training scans of 4 actors (neutral + 4 expressions each, ~0.7 M
 #      vertex meshes, 3 calibrated cameras) and trains the detail model on them
@@ -41,8 +41,8 @@ step "ray-tracing previews"
 "$crease" mesh render "$out/expression.ply" -o "$out/expression.png"
 "$crease" mesh render "$out/expression.vtp" --field displacement_magnitude_mm -o "$out/expression_displacement.png"
 
-step "building the studio's procedural head rig and actor 1 (an older actor: many, deep lines)"
-"$crease" synth rig -o "$out/head.crig" --preview "$out/head_rig.png"
+step "building the studio's realistic head rig (ICT-FaceKit, data/ict) and actor 1 (an older actor: many, deep lines)"
+"$crease" synth rig --head ict -o "$out/head.crig" --preview "$out/head_rig.png"
 "$crease" synth actor --rig "$out/head.crig" --seed 1 -o "$out/actor1.json"
 step "a brow raise under raking light and under front light"
 "$crease" synth render --rig "$out/head.crig" --actor "$out/actor1.json" -e browInnerUp=1,browOuterUp=1 \

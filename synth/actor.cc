@@ -6,6 +6,8 @@
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
+#include <array>
+#include <numbers>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -29,6 +31,8 @@ void ActorOptions::VisitFields(OptionVisitor& v) {
   v.Field("style_min", style_min);
   v.Field("style_max", style_max);
   v.Field("static_lines", static_lines);
+  v.Field("expression_deviation", expression_deviation);
+  v.Field("expression_deviation_wavelength_mm", expression_deviation_wavelength_mm);
   v.Field("static_shape_rms_mm", static_shape_rms_mm);
   v.Field("static_shape_wavelength_mm", static_shape_wavelength_mm);
   v.Field("mesoscopic_scale", mesoscopic_scale);
@@ -51,6 +55,9 @@ void ActorOptions::Check() const {
   CheckGe(o, "style_min", style_min, -1.0);
   CheckLe(o, "style_max", style_max, 1.0);
   CheckLe(o, "style_min", style_min, style_max);
+  CheckGe(o, "expression_deviation", expression_deviation, 0.0);
+  CheckLe(o, "expression_deviation", expression_deviation, 1.0);
+  CheckGt(o, "expression_deviation_wavelength_mm", expression_deviation_wavelength_mm, 0.0);
   CheckGe(o, "static_shape_rms_mm", static_shape_rms_mm, 0.0);
   CheckGt(o, "static_shape_wavelength_mm", static_shape_wavelength_mm, 0.0);
   CheckGe(o, "mesoscopic_scale", mesoscopic_scale, 0.0);
@@ -92,7 +99,43 @@ Actor GenerateActor(const FaceRig& rig, uint64_t seed, const ActorOptions& optio
   actor.mesoscopic.roughness_mm *= options.mesoscopic_scale;
   actor.mesoscopic.fine_line_depth_mm *= options.mesoscopic_scale;
   actor.skin = GenerateSkinParams(skin_rng);
+  Rng deviation_rng = root.Fork(7);
+  actor.expression_deviation.seed = deviation_rng.NextU64();
+  actor.expression_deviation.amount = options.expression_deviation;
+  actor.expression_deviation.wavelength_mm = options.expression_deviation_wavelength_mm;
   return actor;
+}
+
+FaceRig PersonalRig(const FaceRig& rig, const Actor& actor) {
+  const ExpressionDeviationParams& d = actor.expression_deviation;
+  if (d.amount <= 0.0 || rig.num_expressions() == 0) return rig;
+  FaceRig personal = rig;
+  Rng rng(d.seed);
+  constexpr int kWaves = 8;               // random Fourier features of the modulation field
+  constexpr double kAsymmetryMm = 60.0;   // x at which the asymmetry reaches a_b
+  const double omega = 2.0 * std::numbers::pi / d.wavelength_mm;
+  const int nv = rig.num_vertices();
+  for (int b = 0; b < rig.num_expressions(); ++b) {
+    const double gain = 1.0 + d.amount * rng.Normal();
+    const double asym = d.amount * rng.Normal();
+    std::array<Eigen::Vector3d, kWaves> w;
+    std::array<double, kWaves> phase;
+    for (int k = 0; k < kWaves; ++k) {
+      w[k] = Eigen::Vector3d(rng.Normal(), rng.Normal(), rng.Normal()) * omega;
+      phase[k] = rng.Uniform(0.0, 2.0 * std::numbers::pi);
+    }
+    for (int v = 0; v < nv; ++v) {
+      const Eigen::Vector3d p = rig.neutral.V.row(v).transpose();
+      double n = 0.0;
+      for (int k = 0; k < kWaves; ++k) n += std::cos(w[k].dot(p) + phase[k]);
+      n *= d.amount * std::sqrt(2.0 / kWaves);
+      const double factor = std::clamp(gain * (1.0 + asym * std::clamp(p.x() / kAsymmetryMm, -1.5, 1.5)) * (1.0 + n),
+                                       0.0, 2.0);
+      personal.expression_basis.block(3 * v, b, 3, 1) *= static_cast<float>(factor);
+    }
+  }
+  personal.source += fmt::format("; personal expression deviations (seed {}, amount {})", d.seed, d.amount);
+  return personal;
 }
 
 namespace {
@@ -225,6 +268,9 @@ std::string ActorToJson(const Actor& a) {
   j["options"] = json::parse(OptionsToJson(a.options));
   j["identity"] = std::vector<double>(a.identity.data(), a.identity.data() + a.identity.size());
   j["style"] = {{"age", a.style.age}, {"shape", a.style.shape}, {"static_lines", a.style.static_lines}};
+  j["expression_deviation"] = {{"seed", a.expression_deviation.seed},
+                               {"amount", a.expression_deviation.amount},
+                               {"wavelength_mm", a.expression_deviation.wavelength_mm}};
   j["static_shape"] = {{"seed", a.static_shape.seed},
                        {"rms_mm", a.static_shape.rms_mm},
                        {"wavelength_mm", a.static_shape.wavelength_mm}};
@@ -289,6 +335,12 @@ Actor ActorFromJson(const std::string& text, const std::string& what) {
     a.style.age = r.Range(s, "style", "age", 0.0, 1.0);
     a.style.shape = r.Range(s, "style", "shape", -1.0, 1.0);
     a.style.static_lines = r.Bool(s, "style", "static_lines");
+  }
+  if (j.contains("expression_deviation")) {  // absent in actors written before it existed: none
+    const json& d = r.Get(j, "", "expression_deviation");
+    a.expression_deviation.seed = r.Unsigned(d, "expression_deviation", "seed");
+    a.expression_deviation.amount = r.Range(d, "expression_deviation", "amount", 0.0, 1.0);
+    a.expression_deviation.wavelength_mm = r.Range(d, "expression_deviation", "wavelength_mm", 1e-3, 1e4);
   }
   {
     const json& s = r.Get(j, "", "static_shape");
@@ -366,7 +418,7 @@ Actor ReadActor(const std::filesystem::path& path) {
 
 // ---------------------------------------------------------------------------
 
-ActorModel::ActorModel(const FaceRig& rig, const Actor& actor) : rig_(rig), actor_(actor) {
+ActorModel::ActorModel(const FaceRig& rig, const Actor& actor) : rig_(PersonalRig(rig, actor)), actor_(actor) {
   actor_.options.Check();
   Require(rig_.neutral.has_uv(), "ActorModel: the rig has no UV coordinates");
   Require(actor_.identity.size() <= rig_.num_identity(),

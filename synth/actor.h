@@ -12,7 +12,10 @@
 //     Sec. 4.3 / 5.2 regress;
 //   * M: mesoscopic detail (pores, fine lines; synth/skin.h), static;
 //   * skin albedo, specular and roughness maps (synth/skin.h), independent of
-//     the wrinkle layout.
+//     the wrinkle layout;
+//   * personal expression deviations: the actor's own version of the rig's
+//     expression shapes (ExpressionDeviationParams), so the coarse surface is
+//     V0 + Iα + B'β with B' ≠ B (PersonalRig).
 // Maps are CV_32F R×R (R = ActorOptions::resolution, 1024 as in Sec. 4.2) in the
 // rig's UV layout, mm along the normal, positive outwards.
 //
@@ -66,9 +69,26 @@ struct ActorOptions {
   int strain_resolution = 256;     // metric-tensor map size for wrinkle compression, texels
   double strain_smoothing_mm = 3.0;  // σ smoothing the compression field, mm
   double phong_alpha = kDefaultPhongAlpha;  // α: rounding of the coarse facets under the hi-res surface
+  double expression_deviation = 0.15;       // σ of the personal expression deviations (0 = none)
+  double expression_deviation_wavelength_mm = 40.0;  // their feature size, mm
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
+};
+
+// Personal expression deviations: this actor's version of each of the rig's
+// expression shapes differs from the rig's by a gain, a left–right asymmetry and
+// a smooth spatial modulation of the delta, all drawn per shape:
+//   B'_b(v) = B_b(v) · g_b · (1 + a_b · x_v / 60 mm) · (1 + n_b(p_v)),
+//   g_b = 1 + σ·N(0,1), a_b = σ·N(0,1), n_b a smooth random field of standard
+//   deviation σ and feature size `wavelength_mm` over the neutral positions p_v,
+// with σ = `amount` (factors clamped to [0, 2]). No rig shared by all actors
+// represents these expressions exactly: the model error that the tracker's
+// blendshape prior cannot fit and Sec. 5.1's refinement is there to correct.
+struct ExpressionDeviationParams {
+  uint64_t seed = 0;
+  double amount = 0.0;          // σ; 0 = the rig's own shapes
+  double wavelength_mm = 40.0;  // feature size of the spatial modulation, mm
 };
 
 struct StaticShapeParams {
@@ -88,7 +108,13 @@ struct Actor {
   StaticShapeParams static_shape;
   MesoscopicParams mesoscopic;
   SkinParams skin;
+  ExpressionDeviationParams expression_deviation;  // absent in older actor files: none
 };
+
+// The rig as this actor's face moves: `rig` with the actor's expression
+// deviations applied to its expression basis (the rig itself when they are 0).
+// ActorModel renders with it, and evaluation takes the truth from it.
+FaceRig PersonalRig(const FaceRig& rig, const Actor& actor);
 
 // A random actor for `rig`. Independent streams (forked from `seed`) draw the
 // identity, the style, the wrinkle layout, the static shape, the mesoscopic
@@ -139,6 +165,7 @@ class ActorModel {
   // D for coarse rig positions V (#V×3) of this actor.
   cv::Mat ExpressionDisplacement(const MatX3d& V) const;
 
+  // The actor's personal rig (PersonalRig: the input rig with its expression deviations).
   const FaceRig& rig() const { return rig_; }
   const Actor& actor() const { return actor_; }
   const FaceAnchors& anchors() const { return anchors_; }

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -342,6 +344,42 @@ TEST(Actor, StaticShapeFadesOutAtTheFaceChartRim) {
   const double inside_rms = std::sqrt(inside_sq / inside);
   EXPECT_GT(inside_rms, 0.3 * model.actor().static_shape.rms_mm);
   EXPECT_LT(rim_max, 0.05 * inside_rms * 3.0 + 1e-6);  // ≤ 5 % of the ±3 RMS clamp
+}
+
+TEST(Actor, PersonalExpressionsDeviateFromTheRigWhereItMoves) {
+  const FaceRig& rig = SampleRig();
+  ActorOptions opt = TestOptions(256);
+  const Actor a = GenerateActor(rig, 5, opt);
+  EXPECT_EQ(a.expression_deviation.amount, opt.expression_deviation);
+  const FaceRig personal = PersonalRig(rig, a);
+  EXPECT_EQ(personal.neutral.V, rig.neutral.V);
+  EXPECT_EQ(personal.identity_basis, rig.identity_basis);
+  // Each shape changes, but only where the rig's shape moves, and by a factor in [0, 2].
+  for (int b = 0; b < rig.num_expressions(); ++b) {
+    const Eigen::VectorXf B = rig.expression_basis.col(b), P = personal.expression_basis.col(b);
+    EXPECT_GT((P - B).norm(), 0.02 * B.norm()) << rig.expression_names[b];
+    for (Eigen::Index i = 0; i < B.size(); ++i) {
+      if (B[i] == 0.0f) EXPECT_EQ(P[i], 0.0f);
+      EXPECT_LE(std::abs(P[i]), 2.0f * std::abs(B[i]) + 1e-6f);
+      EXPECT_GE(P[i] * B[i], 0.0f);
+    }
+  }
+  // Not a rescaling of the rig's shape: no single weight on the rig's shape fits it.
+  const int jaw = rig.ExpressionIndex("jawOpen");
+  const Eigen::VectorXf B = rig.expression_basis.col(jaw), P = personal.expression_basis.col(jaw);
+  const float w = B.dot(P) / B.squaredNorm();
+  EXPECT_GT((P - w * B).norm(), 0.03 * P.norm());
+  // The actor's model moves with it; amount 0 gives the rig back exactly.
+  const ActorModel model(rig, a);
+  const Eigen::VectorXd e = Weights(rig, {{"jawOpen", 1.0}});
+  EXPECT_EQ(model.Frame(e, false).coarse.V, personal.EvaluatePositions(a.identity, e));
+  Actor none = a;
+  none.expression_deviation.amount = 0.0;
+  EXPECT_EQ(PersonalRig(rig, none).expression_basis, rig.expression_basis);
+  // Actor files from before the deviations existed read as "none".
+  nlohmann::json j = nlohmann::json::parse(ActorToJson(a));
+  j.erase("expression_deviation");
+  EXPECT_EQ(ActorFromJson(j.dump(), "old.json").expression_deviation.amount, 0.0);
 }
 
 TEST(Actor, JsonRoundTripRebuildsIdentically) {

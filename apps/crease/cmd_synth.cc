@@ -9,8 +9,8 @@
 #include "core/face_rig.h"
 #include "core/image_io.h"
 #include "core/preview_render.h"
-#include "synth/ict_head.h"
 #include "synth/procedural_rig.h"
+#include "synth/studio_rig.h"
 
 namespace crease::app {
 
@@ -64,31 +64,25 @@ void AddSynthCommands(CLI::App& app) {
   {
     auto* cmd = synth->add_subcommand("rig", "Build a studio head rig (.crig): the realistic ICT-FaceKit head or "
                                              "the procedural one");
-    static std::string out, preview, head = "procedural", from;
+    static std::string out, preview, head, from;
     static std::vector<std::string> sets;
     static int preview_tile = 512;
     cmd->add_option("--out,-o", out, "Output rig file (.crig)")->required();
-    cmd->add_option("--head", head, "ict: the ICT-FaceKit head (synth/ict_head.h); procedural: the SDF head")
-        ->check(CLI::IsMember({"ict", "procedural"}))
-        ->capture_default_str();
+    cmd->add_option("--head", head, "ict: the realistic ICT-FaceKit head (default, synth/ict_head.h); "
+                                    "procedural: the SDF head (synth/procedural_rig.h)")
+        ->check(CLI::IsMember({"ict", "procedural"}));
     cmd->add_option("--from", from, "With --head ict: the imported ICT rig (default: the vendored "
                                     "data/ict/ict_face_light.crig)");
-    cmd->add_option("--set", sets, "Rig option KEY=VALUE (repeatable), e.g. face_columns=72 (procedural), "
-                                   "identity_modes=40 (ict)");
+    cmd->add_option("--set", sets, "Rig option KEY=VALUE (repeatable): identity_modes=40 (ict), face_columns=72 "
+                                   "(procedural), … (synth/studio_rig.h)");
     cmd->add_option("--preview", preview, "Also write a contact sheet of renders (neutral and expressions)");
     cmd->add_option("--preview-tile", preview_tile, "Preview tile size, pixels")->capture_default_str();
     cmd->callback([] {
-      FaceRig rig;
-      if (head == "ict") {
-        IctHeadOptions opt;
-        if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &opt);
-        rig = BuildIctStudioRig(ReadRig(from.empty() ? VendoredIctRigPath() : std::filesystem::path(from)), opt);
-      } else {
-        Require(from.empty(), "--from is for --head ict");
-        ProceduralRigOptions opt;
-        if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &opt);
-        rig = BuildProceduralRig(opt);
-      }
+      StudioRigOptions opt;
+      if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &opt);
+      if (!head.empty()) opt.head = head;
+      if (!from.empty()) opt.ict_rig = from;
+      const FaceRig rig = BuildStudioRig(opt);
       WriteRig(out, rig);
       const ChartDistortion d = MeasureFaceChartDistortion(rig);
       std::printf("wrote %s: %d vertices, %d triangles, %d identity modes, %d expressions, %zu landmarks, "

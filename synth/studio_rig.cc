@@ -1,0 +1,30 @@
+#include "synth/studio_rig.h"
+
+#include <fmt/format.h>
+
+#include "core/error.h"
+
+namespace crease {
+
+void StudioRigOptions::VisitFields(OptionVisitor& v) {
+  v.Field("head", head);
+  v.Field("ict_rig", ict_rig);
+  ict.VisitFields(v);
+  procedural.VisitFields(v);
+}
+
+void StudioRigOptions::Check() const {
+  Require(head == "ict" || head == "procedural",
+          fmt::format("StudioRigOptions: head = '{}' must be \"ict\" or \"procedural\"", head));
+  ict.Check();
+  procedural.Check();
+}
+
+FaceRig BuildStudioRig(const StudioRigOptions& options) {
+  options.Check();
+  if (options.head == "procedural") return BuildProceduralRig(options.procedural);
+  return BuildIctStudioRig(
+      ReadRig(options.ict_rig.empty() ? VendoredIctRigPath() : std::filesystem::path(options.ict_rig)), options.ict);
+}
+
+}  // namespace crease
