@@ -26,6 +26,7 @@
 #include "pipeline/capture/capture_io.h"
 #include "pipeline/capture/hifi_mesh.h"
 #include "pipeline/training/wrinkle_map.h"
+#include "eval/rig_correspondence.h"
 #include "synth/actor.h"
 
 namespace crease {
@@ -278,33 +279,39 @@ fs::path TruthMapPath(const fs::path& dataset, const json& info, int frame) {
   return dataset / fmt::format(fmt::runtime(pattern), fmt::arg("frame", frame));
 }
 
-// The prior error of a tracking rig: the best fit of its linear model
-// V0 + Iα + Bβ to a true coarse mesh of the same topology (head frame), over the
-// face-chart vertices, by unconstrained least squares in (α, β). With weights
-// unbounded this is a lower bound of what any tracker using that rig can reach:
-// the part of the truth the rig cannot represent (issue 15).
+// The prior error of a tracking rig: the best fit of its linear model to a true
+// coarse mesh (head frame), over the face-chart vertices, by unconstrained least
+// squares: the expression weights β alone when the identity is known (a rig of the
+// truth's topology, at the actor's true identity α: the tracker's identity phase at
+// its best), else α and β together (another rig: no shared identity, so a lower
+// bound). With β unbounded it is a lower bound of what a tracker using the rig can
+// reach: the part of the truth the rig cannot represent (issue 15).
 class RigPriorFit {
  public:
-  RigPriorFit(const FaceRig& rig, const std::vector<int>& ids) : rig_(rig), ids_(ids) {
-    const int ni = rig.num_identity(), ne = rig.num_expressions();
-    Eigen::MatrixXd A(3 * static_cast<Eigen::Index>(ids.size()), ni + ne);
+  // `identity`: the fixed α (#I of `rig`), or empty to fit it per frame.
+  RigPriorFit(const FaceRig& rig, const std::vector<int>& ids, Eigen::VectorXd identity)
+      : rig_(rig), ids_(ids), identity_(std::move(identity)) {
+    const bool fit_identity = identity_.size() == 0;
+    const int ni = fit_identity ? rig.num_identity() : 0, ne = rig.num_expressions();
+    A_.resize(3 * static_cast<Eigen::Index>(ids.size()), ni + ne);
     for (size_t r = 0; r < ids.size(); ++r) {
       for (int k = 0; k < 3; ++k) {
         const Eigen::Index row = 3 * static_cast<Eigen::Index>(r) + k, src = 3 * ids[r] + k;
-        if (ni > 0) A.row(row).head(ni) = rig.identity_basis.row(src).cast<double>();
-        if (ne > 0) A.row(row).tail(ne) = rig.expression_basis.row(src).cast<double>();
+        if (ni > 0) A_.row(row).head(ni) = rig.identity_basis.row(src).cast<double>();
+        if (ne > 0) A_.row(row).tail(ne) = rig.expression_basis.row(src).cast<double>();
       }
     }
-    A_ = A;
     qr_.compute(A_);
+    base_ = rig.EvaluatePositions(identity_, {});
   }
-  // The fitted positions of every vertex of `truth_head` (#V×3, head frame).
+  // The fitted positions of every vertex for `truth_head` (#V×3, head frame).
   MatX3d Fit(const MatX3d& truth_head) const {
     Eigen::VectorXd r(3 * static_cast<Eigen::Index>(ids_.size()));
     for (size_t i = 0; i < ids_.size(); ++i) {
-      r.segment<3>(3 * static_cast<Eigen::Index>(i)) = (truth_head.row(ids_[i]) - rig_.neutral.V.row(ids_[i])).transpose();
+      r.segment<3>(3 * static_cast<Eigen::Index>(i)) = (truth_head.row(ids_[i]) - base_.row(ids_[i])).transpose();
     }
     const Eigen::VectorXd x = A_.cols() > 0 ? Eigen::VectorXd(qr_.solve(r)) : Eigen::VectorXd();
+    if (identity_.size() > 0) return rig_.EvaluatePositions(identity_, x);
     const int ni = rig_.num_identity();
     return rig_.EvaluatePositions(x.head(ni), x.tail(x.size() - ni));
   }
@@ -312,6 +319,8 @@ class RigPriorFit {
  private:
   const FaceRig& rig_;
   std::vector<int> ids_;
+  Eigen::VectorXd identity_;
+  MatX3d base_;
   Eigen::MatrixXd A_;
   Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr_;
 };
@@ -332,9 +341,9 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
 
   const FaceRig truth_rig = ReadRig(dataset / "rig.crig");
   const FaceRig rig = ReadRig(capture / "rig.crig");  // the compatible rig capture used
-  Require(rig.num_vertices() == truth_rig.num_vertices(),
-          fmt::format("{}: the capture's rig has {} vertices but the dataset's {}", (capture / "rig.crig").string(),
-                      rig.num_vertices(), truth_rig.num_vertices()));
+  // A capture with another rig than the dataset's is measured through a surface
+  // correspondence; D^t, in the other rig's UV layout, is then not compared.
+  const RigCorrespondence corr = CorrespondRigs(rig, truth_rig);
   const CameraIntrinsics K = ReadCamera(dataset / "camera.json").intrinsics;
   const Camera cam(K, Rigid3d());
 
@@ -345,8 +354,8 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     for (int k = 0; k < 3; ++k) on_face[face_F(f, k)] = 1;
   std::vector<int> face_ids;
   for (int i = 0; i < rig.num_vertices(); ++i)
-    if (on_face[i]) face_ids.push_back(i);
-  TriMesh face_mesh = truth_rig.neutral;
+    if (on_face[i] && corr.Has(i)) face_ids.push_back(i);
+  TriMesh face_mesh = rig.neutral;
   face_mesh.F = face_F;
   const int R = cap.value("map_resolution", 1024);
   const cv::Mat coverage = CoverageMask(RasterizeUv(face_mesh, R, R, "rig face chart"));
@@ -362,7 +371,13 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   const std::optional<Actor> truth_actor =
       fs::is_regular_file(actor_path) ? std::optional<Actor>(ReadActor(actor_path)) : std::nullopt;
   const FaceRig truth_motion = truth_actor ? PersonalRig(truth_rig, *truth_actor) : truth_rig;
-  const RigPriorFit prior(rig, face_ids);
+  Eigen::VectorXd known_identity;  // the actor's α, when the tracking rig shares the truth's identity modes
+  if (truth_actor && corr.same_topology) {
+    known_identity = truth_actor->identity;
+    known_identity.conservativeResize(rig.num_identity());
+    for (Eigen::Index k = truth_actor->identity.size(); k < known_identity.size(); ++k) known_identity[k] = 0.0;
+  }
+  const RigPriorFit prior(rig, face_ids, known_identity);
 
   std::optional<ActorModel> actor;
   std::unique_ptr<HifiMeshBuilder> hifi;
@@ -404,7 +419,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     if (!e.tracked) {
       // Was the face there to be tracked? (the loss metrics)
       e.true_visible_fraction =
-          visible_fraction(ReadFrameTruth(dataset, index, truth_rig.num_vertices()).vertex_visible);
+          visible_fraction(corr.MapTruth(ReadFrameTruth(dataset, index, truth_rig.num_vertices())).vertex_visible);
       prev_frame = -2;
       s.per_frame.push_back(e);
       continue;
@@ -413,12 +428,15 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
             fmt::format("{}: {} vertices, the rig has {}", (capture / "frames").string(), arrays.coarse.rows(),
                         rig.num_vertices()));
     ++tracked_count;
-    const FrameTruth truth = ReadFrameTruth(dataset, index, truth_rig.num_vertices());
+    const FrameTruth truth = corr.MapTruth(ReadFrameTruth(dataset, index, truth_rig.num_vertices()));
     Eigen::VectorXd identity = truth.identity;
     if (identity.size() != truth_rig.num_identity()) identity.conservativeResize(truth_rig.num_identity());
-    const MatX3d true_head = truth_motion.EvaluatePositions(identity, ExpressionVector(truth_rig, truth.expression));
+    // The truth at the tracking rig's vertices (head frame of the truth rig, then camera).
+    const MatX3d true_head =
+        corr.Map(truth_motion.EvaluatePositions(identity, ExpressionVector(truth_rig, truth.expression)));
     const MatX3d true_cam = Transform(truth.cam_from_head, true_head);
-    const MatX3d prior_cam = Transform(truth.cam_from_head, prior.Fit(true_head));
+    const MatX3d prior_cam =
+        Transform(truth.cam_from_head, corr.FromTrackingFrame(prior.Fit(corr.ToTrackingFrame(true_head))));
     e.prior_mm = MeanDistance(prior_cam, true_cam, face_ids);
 
     // 2D and 3D vertex errors over the visible face-chart vertices.
@@ -484,7 +502,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     const fs::path d_path = capture / "displacement" / fmt::format("{:06d}.exr", index);
     cv::Mat band_err;
     cv::Mat D;
-    if (fs::is_regular_file(d_path)) {
+    if (corr.same_topology && fs::is_regular_file(d_path)) {
       D = ReadMap(d_path, R);
       const cv::Mat G = ReadMap(TruthMapPath(dataset, info, index), R, /*resample=*/true);
       e.has_displacement = true;
@@ -754,8 +772,8 @@ std::string CaptureEvalSummary::ToMarkdown() const {
                    refined_aligned_mm);
   o << fmt::format("| jitter (frame-to-frame change of the 2D error), px | {:.3f} | {:.3f} |\n\n", coarse_jitter_px,
                    refined_jitter_px);
-  o << fmt::format("Prior error (the tracking rig's best least-squares fit to the true coarse mesh, the model error "
-                   "a blendshape prior cannot remove): {:.2f} px, {:.2f} mm\n\n",
+  o << fmt::format("Prior error (the tracking rig's best least-squares fit to the true coarse mesh at the true "
+                   "identity, the model error a blendshape prior cannot remove): {:.2f} px, {:.2f} mm\n\n",
                    prior_px, prior_mm);
   if (displacement_frames > 0) {
     o << fmt::format("## Displacement D^t (paper Sec. 5.2): {} frames, {} with wrinkles (pooled below)\n\n",

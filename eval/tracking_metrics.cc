@@ -44,6 +44,10 @@ FrameTruth ReadFrameTruth(const fs::path& dataset, int frame, int num_vertices) 
   }
   const fs::path bpath = dataset / "truth" / (name + "_vertices.bin");
   const std::string bytes = ReadFileToString(bpath);
+  if (num_vertices < 0) {  // as many as the file holds
+    Require(bytes.size() % 12 == 0, fmt::format("{}: {} bytes, not 3 floats per vertex", bpath.string(), bytes.size()));
+    num_vertices = static_cast<int>(bytes.size() / 12);
+  }
   Require(bytes.size() == static_cast<size_t>(num_vertices) * 3 * sizeof(float),
           fmt::format("{}: {} bytes, expected {} (3 floats for each of the rig's {} vertices)", bpath.string(),
                       bytes.size(), static_cast<size_t>(num_vertices) * 12, num_vertices));

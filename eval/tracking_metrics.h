@@ -25,6 +25,7 @@ struct FrameTruth {
 };
 
 // Reads truth/NNNNNN.json and truth/NNNNNN_vertices.bin; errors name the file.
+// num_vertices: the truth rig's vertex count, or -1 for as many as the file holds.
 FrameTruth ReadFrameTruth(const std::filesystem::path& dataset, int frame, int num_vertices);
 
 struct FrameTrackingError {

@@ -69,7 +69,7 @@ struct ActorOptions {
   int strain_resolution = 256;     // metric-tensor map size for wrinkle compression, texels
   double strain_smoothing_mm = 3.0;  // σ smoothing the compression field, mm
   double phong_alpha = kDefaultPhongAlpha;  // α: rounding of the coarse facets under the hi-res surface
-  double expression_deviation = 0.15;       // σ of the personal expression deviations (0 = none)
+  double expression_deviation = 0.3;        // σ of the personal expression deviations (0 = none)
   double expression_deviation_wavelength_mm = 40.0;  // their feature size, mm
 
   void VisitFields(OptionVisitor& v);

@@ -21,7 +21,7 @@ namespace crease {
 
 void ScannedHeadOptions::VisitFields(OptionVisitor& v) {
   v.Field("units_to_mm", units_to_mm);
-  v.Field("flip_v", flip_v);
+  v.Field("v_up", v_up);
   v.Field("displacement_scale_mm", displacement_scale_mm);
   v.Field("displacement_midlevel", displacement_midlevel);
   v.Field("grid_resolution", grid_resolution);
@@ -32,7 +32,8 @@ void ScannedHeadOptions::VisitFields(OptionVisitor& v) {
 
 void ScannedHeadOptions::Check() const {
   const char* o = "ScannedHeadOptions";
-  CheckGt(o, "units_to_mm", units_to_mm, 0.0);
+  CheckGe(o, "units_to_mm", units_to_mm, 0.0);
+  CheckOneOf(o, "v_up", v_up, {"auto", "yes", "no"});
   CheckGe(o, "grid_resolution", grid_resolution, 16);
   CheckLe(o, "grid_resolution", grid_resolution, 8192);
   CheckGe(o, "phong_alpha", phong_alpha, 0.0);
@@ -93,7 +94,7 @@ std::vector<double> ReadAccessor(const tinygltf::Model& model, int index, int co
 
 }  // namespace
 
-TriMesh ReadGltfMesh(const std::filesystem::path& path, cv::Mat* base_color) {
+TriMesh ReadGltfMesh(const std::filesystem::path& path, cv::Mat* base_color, double units_to_mm) {
   RequireReadableFile(path);
   const std::string what = path.string();
   tinygltf::Model model;
@@ -153,7 +154,7 @@ TriMesh ReadGltfMesh(const std::filesystem::path& path, cv::Mat* base_color) {
       Require(p.size() / 3 == t.size() / 2, fmt::format("{}: POSITION and TEXCOORD_0 differ in length", what));
       const int base = static_cast<int>(V.size());
       for (size_t i = 0; i < p.size() / 3; ++i) {
-        V.emplace_back(1000.0 * (transform * Eigen::Vector3d(p[3 * i], p[3 * i + 1], p[3 * i + 2])));  // metres → mm
+        V.emplace_back(units_to_mm * (transform * Eigen::Vector3d(p[3 * i], p[3 * i + 1], p[3 * i + 2])));
         UV.emplace_back(t[2 * i], t[2 * i + 1]);  // glTF's v already grows downwards
       }
       const int n = static_cast<int>(p.size() / 3);
@@ -262,6 +263,15 @@ MatX3d NormalsFromNormalMap(const TriMesh& mesh, const cv::Mat& normal_map, cons
   return out;
 }
 
+std::string HeadSizeWarning(const TriMesh& mesh, const std::string& what) {
+  if (mesh.num_vertices() == 0) return "";
+  const auto [lo, hi] = BoundingBox(mesh);
+  const double extent = (hi - lo).maxCoeff();
+  if (extent >= 120.0 && extent <= 600.0) return "";
+  return fmt::format("{}: the head is {:.4g} mm across, not a person's 120-600 mm; are the units right "
+                     "(--units mm|cm|m)?", what, extent);
+}
+
 ScannedHead LoadScannedHead(const std::filesystem::path& mesh_path, const std::filesystem::path& albedo_path,
                             const std::filesystem::path& displacement_path, const ScannedHeadOptions& options,
                             const std::filesystem::path& normal_path) {
@@ -271,15 +281,16 @@ ScannedHead LoadScannedHead(const std::filesystem::path& mesh_path, const std::f
           fmt::format("{}: scanned heads are read from OBJ, PLY or glTF (.gltf, .glb)", mesh_path.string()));
   const bool gltf = ext == ".gltf" || ext == ".glb";
   cv::Mat embedded_albedo;
-  TriMesh scan = gltf ? ReadGltfMesh(mesh_path, &embedded_albedo) : ReadMesh(mesh_path);
+  const double units_to_mm = options.units_to_mm > 0 ? options.units_to_mm : gltf ? 1000.0 : 1.0;
+  TriMesh scan = gltf ? ReadGltfMesh(mesh_path, &embedded_albedo, units_to_mm) : ReadMesh(mesh_path);
   ValidateMesh(scan, mesh_path.string(), {.uv = true});
-  if (!gltf) {
-    scan.V *= options.units_to_mm;
-    if (options.flip_v) scan.UV.col(1) = (1.0 - scan.UV.col(1).array()).matrix();
-  }
+  if (!gltf) scan.V *= units_to_mm;
+  const bool v_up = options.v_up == "yes" || (options.v_up == "auto" && !gltf);
+  if (v_up) scan.UV.col(1) = (1.0 - scan.UV.col(1).array()).matrix();
   scan.N = VertexNormals(scan);
 
   ScannedHead head;
+  if (std::string w = HeadSizeWarning(scan, mesh_path.string()); !w.empty()) head.warnings.push_back(std::move(w));
   head.source_vertices = scan.num_vertices();
   Require(!albedo_path.empty() || !embedded_albedo.empty(),
           fmt::format("{}: no albedo texture (give one; only glTF files can carry their own)", mesh_path.string()));

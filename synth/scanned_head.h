@@ -11,9 +11,12 @@
 //   d = (value − displacement_midlevel) · displacement_scale_mm.
 // Without a displacement map the scan is rendered as it is.
 //
-// glTF: positions are metres by the standard (scaled by 1000, `units_to_mm` is not
-// used), UVs already have v downwards (`flip_v` is not used), and the triangle
-// primitives of every mesh instance of the default scene are read, placed by their
+// Units and UV convention default to the format's: glTF positions are metres and
+// its v grows downwards (as crease's), OBJ/PLY are taken as mm with v upwards.
+// `units_to_mm` and `v_up` override the default for any format (three.js assets
+// such as the Lee Perry-Smith head are glTF in other units with v up). A head whose
+// largest extent is not between 120 and 600 mm gives a warning naming the units.
+// glTF: the triangle primitives of every mesh instance of the default scene are read, placed by their
 // nodes' transforms (matrix or translation-rotation-scale, composed down the node
 // tree); a file without a scene gives every mesh once, untransformed.
 //
@@ -33,6 +36,7 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "core/options.h"
 #include "core/tri_mesh.h"
@@ -41,8 +45,8 @@
 namespace crease {
 
 struct ScannedHeadOptions {
-  double units_to_mm = 1.0;            // scale of the mesh file's coordinates
-  bool flip_v = true;                  // OBJ/PLY texture v grows upwards; crease's downwards
+  double units_to_mm = 0.0;            // scale of the mesh file's coordinates; 0 = the format's (glTF m, else mm)
+  std::string v_up = "auto";           // the file's texture v grows upwards: yes | no | auto (OBJ/PLY yes, glTF no)
   double displacement_scale_mm = 1.0;  // mm per unit of the displacement map's values
   double displacement_midlevel = 0.0;  // map value meaning "no displacement" (0.5 for 8-bit maps)
   int grid_resolution = 1024;          // resampling grid for displacement, texels per side
@@ -58,6 +62,7 @@ struct ScannedHead {
   TriMesh surface;           // what is rendered (mm, crease UV convention)
   SceneMaterials materials;  // albedo from the texture, skin specular
   int source_vertices = 0;   // of the scan mesh
+  std::vector<std::string> warnings;  // e.g. an implausible head size for the units
 };
 
 // Errors name the file and the problem: a mesh without UVs, a texture that cannot be
@@ -72,8 +77,14 @@ ScannedHead LoadScannedHead(const std::filesystem::path& mesh, const std::filesy
 // downwards; normals computed when absent), per vertex, unit length; see above.
 MatX3d NormalsFromNormalMap(const TriMesh& mesh, const cv::Mat& normal_map, const ScannedHeadOptions& options);
 
-// The triangles of a glTF 2.0 file (mm) and, when `base_color` is given, its first
+// The triangles of a glTF 2.0 file, scaled by `units_to_mm` (glTF's metres by
+// default), with the file's UVs, and, when `base_color` is given, its first
 // material's base colour texture (linear RGB float; empty when it has none).
-TriMesh ReadGltfMesh(const std::filesystem::path& path, cv::Mat* base_color = nullptr);
+TriMesh ReadGltfMesh(const std::filesystem::path& path, cv::Mat* base_color = nullptr, double units_to_mm = 1000.0);
+
+// The plausible size of a head: its largest extent in [120, 600] mm (a head with
+// neck and shoulders stays under 600); "" when plausible, else a warning naming
+// `what` and the extent.
+std::string HeadSizeWarning(const TriMesh& mesh, const std::string& what);
 
 }  // namespace crease

@@ -202,6 +202,18 @@ TEST(ScannedHead, ReadsGltfWithItsBaseColourTexture) {
   ASSERT_EQ(head.surface.num_vertices(), grid.num_vertices());
   EXPECT_LT((head.surface.V - grid.V * 1000.0).cwiseAbs().maxCoeff(), 1e-3);  // metres → mm (float precision)
   EXPECT_LT((head.surface.UV - grid.UV).cwiseAbs().maxCoeff(), 1e-6);        // no v flip for glTF
+  EXPECT_TRUE(head.warnings.empty());                                         // 300 mm: a head's size
+  // A three.js-style asset: the same file in centimetres with v up, as the user says.
+  ScannedHeadOptions cm;
+  cm.units_to_mm = 10.0;
+  cm.v_up = "yes";
+  const ScannedHead small = LoadScannedHead(dir / "head.gltf", "", "", cm);
+  EXPECT_LT((small.surface.V - grid.V * 10.0).cwiseAbs().maxCoeff(), 1e-4);
+  EXPECT_LT((small.surface.UV.col(1) - (1.0 - grid.UV.col(1).array()).matrix()).cwiseAbs().maxCoeff(), 1e-6);
+  // 3 mm across: not a person's head, and the warning says to check the units.
+  ASSERT_EQ(small.warnings.size(), 1u);
+  EXPECT_NE(small.warnings[0].find("the head is 3 mm across"), std::string::npos) << small.warnings[0];
+  EXPECT_NE(small.warnings[0].find("--units"), std::string::npos);
   ASSERT_EQ(head.materials.albedo.rows, 4);
   const cv::Vec3f red = head.materials.albedo.at<cv::Vec3f>(1, 1);
   EXPECT_NEAR(red[0], 1.0f, 1e-6);

@@ -14,11 +14,21 @@
 #include "core/preview_render.h"
 #include "core/timer.h"
 #include "core/vtk_io.h"
+#include "synth/scanned_head.h"
 
 namespace crease::app {
 namespace fs = std::filesystem;
 
 namespace {
+
+// Any mesh crease reads: PLY, OBJ, VTP (with its per-vertex fields) or glTF
+// (.gltf, .glb: metres to mm, the file's UVs as they are).
+TriMesh ReadMeshFile(const std::string& path, std::vector<VertexField>* fields) {
+  const std::string ext = LowerExtension(path);
+  if (ext == ".vtp") return ReadVtp(path, fields);
+  if (ext == ".gltf" || ext == ".glb") return ReadGltfMesh(path);
+  return ReadAnyMesh(path);
+}
 
 nlohmann::json MeshInfo(const fs::path& path, const TriMesh& mesh, const std::vector<VertexField>& fields) {
   const auto [lo, hi] = BoundingBox(mesh);
@@ -74,7 +84,7 @@ void AddMeshCommands(CLI::App& app) {
     cmd->add_flag("--json", as_json, "Print JSON instead of text");
     cmd->callback([] {
       std::vector<VertexField> fields;
-      const TriMesh m = LowerExtension(file) == ".vtp" ? ReadVtp(file, &fields) : ReadAnyMesh(file);
+      const TriMesh m = ReadMeshFile(file, &fields);
       ValidateMesh(m, file);
       const nlohmann::json j = MeshInfo(file, m, fields);
       if (as_json) {
@@ -111,7 +121,7 @@ void AddMeshCommands(CLI::App& app) {
     cmd->add_flag("--normals", normals, "Compute area-weighted vertex normals and write them");
     cmd->callback([] {
       std::vector<VertexField> fields;
-      TriMesh m = LowerExtension(in) == ".vtp" ? ReadVtp(in, &fields) : ReadAnyMesh(in);
+      TriMesh m = ReadMeshFile(in, &fields);
       ValidateMesh(m, in);
       if (normals) m.N = VertexNormals(m);
       WriteMeshFile(out, m, ascii, single, fields);
@@ -140,7 +150,7 @@ void AddMeshCommands(CLI::App& app) {
     cmd->callback([] {
       opt.shadows = !no_shadows;
       std::vector<VertexField> fields;
-      const TriMesh m = LowerExtension(in) == ".vtp" ? ReadVtp(in, &fields) : ReadAnyMesh(in);
+      const TriMesh m = ReadMeshFile(in, &fields);
       MatX3d colors;
       if (!field.empty()) {
         const VertexField* f = nullptr;

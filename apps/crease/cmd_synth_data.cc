@@ -22,6 +22,13 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// The --light choices for --help: the presets of synth/lights.h, or a map file.
+std::string LightChoices() {
+  std::string names;
+  for (const auto& n : LightRigNames()) names += (names.empty() ? "" : ", ") + n;
+  return names + ", or an environment map (.exr, .hdr)";
+}
+
 void ParseSize(const std::string& size, StudioOptions* studio) {
   if (size.empty()) return;
   const auto x = size.find('x');
@@ -103,7 +110,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_option("--actor", actor_file, "Actor definition (.json); default: generated from --seed");
     cmd->add_option("--seed", seed, "Actor seed when no --actor is given")->capture_default_str();
     cmd->add_option("--expression,-e", expression, "Expression weights NAME=W,NAME=W (NAME without _L/_R drives both)");
-    cmd->add_option("--light", light, "Light rig preset")->capture_default_str();
+    cmd->add_option("--light", light, "Light rig: " + LightChoices())->capture_default_str();
     cmd->add_option("--yaw", yaw, "Head yaw (degrees)");
     cmd->add_option("--pitch", pitch, "Head pitch (degrees)");
     cmd->add_option("--fov", fov, "Horizontal field of view (degrees); smaller zooms in")->capture_default_str();
@@ -153,7 +160,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_option("--frames", frames, "Render at most this many frames");
     cmd->add_option("--first-frame", first, "First frame to render")->capture_default_str();
     cmd->add_option("--size", size, "Image size WIDTHxHEIGHT (default 640x480)");
-    cmd->add_option("--light", light, "Light rig preset when the sequence keys no light (default studio)");
+    cmd->add_option("--light", light, "Light rig when the sequence keys no light (default studio): " + LightChoices());
     cmd->add_option("--samples", samples, "Anti-aliasing samples per pixel axis")->capture_default_str();
     cmd->add_option("--seed", noise_seed, "Sensor noise seed")->capture_default_str();
     cmd->add_flag("--exr", exr, "Also write the noiseless linear frames (EXR)");
@@ -235,7 +242,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
   // synth render-scan
   {
     auto* cmd = synth->add_subcommand("render-scan", "Relight a real scanned head (OBJ/PLY/glTF + albedo [+ displacement map] [+ normal map])");
-    static std::string mesh, albedo, displacement, normal_map, units = "mm", light = "studio", size, out;
+    static std::string mesh, albedo, displacement, normal_map, units, light = "studio", size, out;
     static ScannedHeadOptions so;
     static double yaw = 0, fov = 30;
     static int samples = 2;
@@ -250,9 +257,13 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_option("--displacement-scale", so.displacement_scale_mm, "mm per unit of the displacement map")->capture_default_str();
     cmd->add_option("--midlevel", so.displacement_midlevel, "Map value of zero displacement (0.5 for 8-bit maps)")->capture_default_str();
     cmd->add_option("--grid", so.grid_resolution, "Resampling grid for the displacement, texels per side")->capture_default_str();
-    cmd->add_option("--units", units, "Units of the mesh coordinates (glTF: always metres)")->check(CLI::IsMember({"mm", "cm", "m"}))->capture_default_str();
-    cmd->add_flag("--keep-v", [](int64_t) { so.flip_v = false; }, "Do not flip v (the file's v already grows downwards)");
-    cmd->add_option("--light", light, "Light rig preset")->capture_default_str();
+    cmd->add_option("--units", units, "Units of the mesh coordinates (default: glTF's metres, mm for OBJ/PLY)")
+        ->check(CLI::IsMember({"mm", "cm", "m"}));
+    cmd->add_flag("--keep-v", [](int64_t) { so.v_up = "no"; }, "The file's texture v grows downwards (glTF's default)");
+    cmd->add_flag("--flip-v", [](int64_t) { so.v_up = "yes"; }, "The file's texture v grows upwards (OBJ/PLY's default; "
+                                                               "e.g. three.js glTF assets)");
+    cmd->add_option("--light", light, "Light rig: " + LightChoices())
+        ->capture_default_str();
     cmd->add_option("--yaw", yaw, "Turn the head (degrees)");
     cmd->add_option("--fov", fov, "Horizontal field of view (degrees)")->capture_default_str();
     cmd->add_option("--size", size, "Image size WIDTHxHEIGHT (default 640x480)");
@@ -260,8 +271,9 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_option("--seed", seed, "Sensor noise seed")->capture_default_str();
     cmd->add_option("--out,-o", out, "Output image (PNG)")->required();
     cmd->callback([] {
-      so.units_to_mm = UnitsToMm(units);
+      if (!units.empty()) so.units_to_mm = UnitsToMm(units);
       const ScannedHead head = LoadScannedHead(mesh, albedo, displacement, so, normal_map);
+      for (const auto& w : head.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
       StudioOptions studio;
       ParseSize(size, &studio);
       TriMesh m = head.surface;

@@ -18,6 +18,7 @@
 #include "core/options.h"
 #include "core/progress.h"
 #include "core/vtk_io.h"
+#include "eval/rig_correspondence.h"
 #include "eval/tracking_metrics.h"
 #include "pipeline/capture/frame_source.h"
 #include "pipeline/capture/tracker.h"
@@ -77,6 +78,14 @@ void AddTrackCommand(CLI::App& app) {
     double err_lm = 0, err_lm_iod = 0, err_fit = 0, err_vertex = 0;
     int err_frames = 0;
     const bool has_truth = dataset && fs::is_directory(info.path / "truth");
+    // The truth of another rig (the dataset's) is measured through a surface correspondence.
+    const RigCorrespondence corr =
+        has_truth && fs::exists(info.path / "rig.crig") ? CorrespondRigs(rig, ReadRig(info.path / "rig.crig"))
+            : RigCorrespondence{};
+    if (!corr.same_topology) {
+      std::printf("the tracking rig differs from the dataset's: vertex errors through a surface correspondence "
+                  "(%d of its vertices matched)\n", corr.matched);
+    }
     while ((tf.max_frames < 0 || n < tf.max_frames) && frames->Next(&frame)) {
       const TrackedFrame t = tracker.Track(frame, frames->index());
       ++n;
@@ -105,7 +114,7 @@ void AddTrackCommand(CLI::App& app) {
           series->Write();
         }
         if (has_truth) {
-          const FrameTruth truth = ReadFrameTruth(info.path, t.frame, rig.num_vertices());
+          const FrameTruth truth = corr.MapTruth(ReadFrameTruth(info.path, t.frame, -1));
           const FrameTrackingError e =
               CompareToTruth(truth, t.landmarks, fitter.ProjectLandmarks(t.fit), projected);
           j["error"] = {{"landmark_px", e.landmark_px},

@@ -68,7 +68,7 @@ TrackedFrame FrameTracker::Track(const cv::Mat& image, int index) {
   TrackedFrame t;
   t.frame = index;
   const auto t0 = std::chrono::steady_clock::now();
-  t.fit = gt_->Fit(ReadFrameTruth(dataset_, index, rig_.num_vertices()).landmarks);
+  t.fit = gt_->Fit(ReadFrameTruth(dataset_, index, -1).landmarks);
   t.fit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   t.landmarks = gt_->last_landmarks();
   t.tracked = true;
