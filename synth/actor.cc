@@ -116,8 +116,15 @@ FaceRig PersonalRig(const FaceRig& rig, const Actor& actor) {
   const double omega = 2.0 * std::numbers::pi / d.wavelength_mm;
   const int nv = rig.num_vertices();
   for (int b = 0; b < rig.num_expressions(); ++b) {
+    // The spatial terms stretch the skin by about σ_x · |B_b| · (their gradient): for
+    // a shape that moves far (jawOpen, ~35 mm) they are scaled down so that this
+    // stretch stays near kDeviationMaxStrain, else the chin folds over itself.
+    double max_delta = 0.0;
+    for (int v = 0; v < nv; ++v) max_delta = std::max(max_delta, static_cast<double>(rig.expression_basis.block(3 * v, b, 3, 1).norm()));
+    const double field_sigma = std::min(d.amount, kDeviationMaxStrain / (omega * std::max(max_delta, 1e-9)));
+    const double asym_sigma = std::min(d.amount, kDeviationMaxStrain * kAsymmetryMm / std::max(max_delta, 1e-9));
     const double gain = 1.0 + d.amount * rng.Normal();
-    const double asym = d.amount * rng.Normal();
+    const double asym = asym_sigma * rng.Normal();
     std::array<Eigen::Vector3d, kWaves> w;
     std::array<double, kWaves> phase;
     for (int k = 0; k < kWaves; ++k) {
@@ -128,7 +135,7 @@ FaceRig PersonalRig(const FaceRig& rig, const Actor& actor) {
       const Eigen::Vector3d p = rig.neutral.V.row(v).transpose();
       double n = 0.0;
       for (int k = 0; k < kWaves; ++k) n += std::cos(w[k].dot(p) + phase[k]);
-      n *= d.amount * std::sqrt(2.0 / kWaves);
+      n *= field_sigma * std::sqrt(2.0 / kWaves);
       const double factor = std::clamp(gain * (1.0 + asym * std::clamp(p.x() / kAsymmetryMm, -1.5, 1.5)) * (1.0 + n),
                                        0.0, 2.0);
       personal.expression_basis.block(3 * v, b, 3, 1) *= static_cast<float>(factor);

@@ -80,11 +80,16 @@ struct ActorOptions {
 // expression shapes differs from the rig's by a gain, a left–right asymmetry and
 // a smooth spatial modulation of the delta, all drawn per shape:
 //   B'_b(v) = B_b(v) · g_b · (1 + a_b · x_v / 60 mm) · (1 + n_b(p_v)),
-//   g_b = 1 + σ·N(0,1), a_b = σ·N(0,1), n_b a smooth random field of standard
-//   deviation σ and feature size `wavelength_mm` over the neutral positions p_v,
-// with σ = `amount` (factors clamped to [0, 2]). No rig shared by all actors
+//   g_b = 1 + σ·N(0,1), a_b = σ_a·N(0,1), n_b a smooth random field of standard
+//   deviation σ_n and feature size `wavelength_mm` over the neutral positions p_v,
+// with σ = `amount` (factors clamped to [0, 2]); σ_a and σ_n are σ, lowered for a
+// shape that moves far so that the stretch they add (σ_n · 2π/λ · max|B_b|, and
+// σ_a · max|B_b| / 60 mm) stays under kDeviationMaxStrain: jawOpen's 35 mm folded
+// the chin over itself at σ 0.3 without it. No rig shared by all actors
 // represents these expressions exactly: the model error that the tracker's
 // blendshape prior cannot fit and Sec. 5.1's refinement is there to correct.
+inline constexpr double kDeviationMaxStrain = 0.08;  // the spatial deviations' stretch of the skin, at most about
+
 struct ExpressionDeviationParams {
   uint64_t seed = 0;
   double amount = 0.0;          // σ; 0 = the rig's own shapes

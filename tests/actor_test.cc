@@ -364,9 +364,10 @@ TEST(Actor, PersonalExpressionsDeviateFromTheRigWhereItMoves) {
       EXPECT_GE(P[i] * B[i], 0.0f);
     }
   }
-  // Not a rescaling of the rig's shape: no single weight on the rig's shape fits it.
-  const int jaw = rig.ExpressionIndex("jawOpen");
-  const Eigen::VectorXf B = rig.expression_basis.col(jaw), P = personal.expression_basis.col(jaw);
+  // Not a rescaling of the rig's shape: no single weight on the rig's shape fits a
+  // shape of a few mm (one that moves far, like jawOpen, keeps mostly its gain).
+  const int brow = rig.ExpressionIndex("browInnerUp");
+  const Eigen::VectorXf B = rig.expression_basis.col(brow), P = personal.expression_basis.col(brow);
   const float w = B.dot(P) / B.squaredNorm();
   EXPECT_GT((P - w * B).norm(), 0.03 * P.norm());
   // The actor's model moves with it; amount 0 gives the rig back exactly.
