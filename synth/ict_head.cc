@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include "core/error.h"
+#include "synth/skin.h"
 
 namespace crease {
 namespace fs = std::filesystem;
@@ -89,6 +90,23 @@ void DropTriangles(FaceRig* rig, const std::vector<uint8_t>& drop) {
   rig->neutral.F = F.topRows(n);
 }
 
+// The head-and-neck part's vertices above the scalp hairline (synth/skin.h) form
+// the part "scalp_hair"; the face chart's share of the scalp is painted by the actor's
+// skin maps with the same hairline.
+void HairOnTheScalp(FaceRig* rig) {
+  const int head = RequirePart(*rig, "head_neck");
+  const int rim = rig->PartIndex("face_rim");  // the face's ring of polygons textured as the back of the head
+  const ScalpHairline line = ScalpHairlineOf(*rig);
+  const int hair = static_cast<int>(rig->part_names.size());
+  rig->part_names.push_back("scalp_hair");
+  for (int v = 0; v < rig->num_vertices(); ++v) {
+    const int part = rig->vertex_part[v];
+    if ((part != head && part != rim) || line.Weight(rig->neutral.V.row(v).transpose()) < 0.5) continue;
+    rig->vertex_part[v] = static_cast<uint8_t>(hair);
+    rig->neutral.UV(v, 0) += hair - part;  // the part's own UV tile
+  }
+}
+
 }  // namespace
 
 FaceRig BuildIctStudioRig(const FaceRig& imported, const IctHeadOptions& options) {
@@ -114,6 +132,7 @@ FaceRig BuildIctStudioRig(const FaceRig& imported, const IctHeadOptions& options
     }
   }
   DropTriangles(&rig, drop);
+  HairOnTheScalp(&rig);
   rig.source += "; dressed for the studio (synth/ict_head.h)";
   rig.Validate("ICT studio rig");
   return rig;

@@ -8,6 +8,8 @@
 //   * the eyes are made opaque-renderable: the sclera's cap over the cornea
 //     (transparent in a game engine) is removed, and the model's inner eye mesh
 //     is split into iris, pupil and sclera (the Light model ships no textures);
+//   * the scalp above a hairline becomes hair (the part "scalp_hair" and the actor's
+//     skin maps, with one hairline: synth/skin.h, ScalpHairline);
 //   * the identity basis is kept to the first IctHeadOptions::identity_modes
 //     modes (the model's modes are scaled to unit standard deviation: a unit
 //     coefficient moves the surface by up to 5–13 mm for the first modes).
@@ -16,7 +18,10 @@
 // z forward out of the face (the model's own frame, scaled from cm).
 //
 // Differences from reality:
-//   1. No hair: the model is bald (eyebrows are painted by the actor's skin maps).
+//   1. No hair geometry: the model is bald; short-cropped hair is a dark material on
+//      the head-and-neck part above the scalp hairline (synth/skin.h,
+//      ScalpHairline; the part "scalp_hair") and painted by the actor's skin maps on the
+//      face chart's share of the scalp; eyebrows and the lash line are painted too.
 //   2. The iris and pupil are uniform materials on the model's iris mesh.
 //   3. No eyelashes (see IctHeadOptions::eyelashes).
 #pragma once

@@ -9,6 +9,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "core/uv_raster.h"
 
 namespace crease {
 namespace {
@@ -18,6 +19,9 @@ namespace {
 constexpr double kBrowDropMm = 2.5;
 constexpr double kBrowHalfOuterMm = 1.4;
 constexpr double kBrowHalfInnerMm = 4.0;
+// Lash line along the upper lid margin: half height at the outer and inner corner, mm.
+constexpr double kLashHalfOuterMm = 1.6;
+constexpr double kLashHalfInnerMm = 0.7;
 
 }  // namespace
 
@@ -94,6 +98,49 @@ cv::Mat LipMask(const FaceAnchors& a, int size, double blur_texels) {
 double SmoothStep(double e0, double e1, double x) {
   const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
   return t * t * (3.0 - 2.0 * t);
+}
+
+// A soft stroke along a UV polyline (outer → inner end), CV_32F size²: 1 within
+// the half height (mm) that goes from half_outer_mm at the outer end to
+// half_inner_mm at the inner, fading over 1 mm; the outer `taper` fraction of the
+// line fades in. Empty for fewer than 2 points.
+cv::Mat PolylineStroke(const std::vector<Vec2>& pts, int size, double mm_per_uv, double half_outer_mm,
+                       double half_inner_mm, double taper) {
+  cv::Mat m(size, size, CV_32F, cv::Scalar(0));
+  if (pts.size() < 2) return m;
+  std::vector<double> arc(pts.size(), 0.0);
+  for (size_t b = 1; b < pts.size(); ++b) arc[b] = arc[b - 1] + (pts[b] - pts[b - 1]).norm();
+  if (arc.back() <= 0) return m;
+  Vec2 lo = pts[0], hi = pts[0];
+  for (const auto& q : pts) {
+    lo = lo.cwiseMin(q);
+    hi = hi.cwiseMax(q);
+  }
+  const double reach = (std::max(half_outer_mm, half_inner_mm) + 1.0) / mm_per_uv;
+  const int i0 = std::max(0, static_cast<int>((lo.x() - reach) * size));
+  const int i1 = std::min(size - 1, static_cast<int>((hi.x() + reach) * size) + 1);
+  const int j0 = std::max(0, static_cast<int>((lo.y() - reach) * size));
+  const int j1 = std::min(size - 1, static_cast<int>((hi.y() + reach) * size) + 1);
+  for (int j = j0; j <= j1; ++j) {
+    for (int i = i0; i <= i1; ++i) {
+      const Vec2 x((i + 0.5) / size, (j + 0.5) / size);
+      double best = 1e30, best_arc = 0;
+      for (size_t b = 0; b + 1 < pts.size(); ++b) {
+        const Vec2 e = pts[b + 1] - pts[b];
+        const double t = std::clamp((x - pts[b]).dot(e) / std::max(e.squaredNorm(), 1e-20), 0.0, 1.0);
+        const double d = (pts[b] + t * e - x).norm();
+        if (d < best) {
+          best = d;
+          best_arc = arc[b] + t * e.norm();
+        }
+      }
+      const double t = best_arc / arc.back();  // 0 outer, 1 inner
+      const double half = half_outer_mm + (half_inner_mm - half_outer_mm) * t;
+      const double fade_in = taper > 0 ? SmoothStep(0.0, taper, t) : 1.0;
+      m.at<float>(j, i) = static_cast<float>((1.0 - SmoothStep(half - 0.5, half + 0.5, best * mm_per_uv)) * fade_in);
+    }
+  }
+  return m;
 }
 
 }  // namespace
@@ -201,6 +248,56 @@ cv::Mat BuildMesoscopicMap(const FaceRig& rig, const FaceAnchors& anchors, const
   return meso;
 }
 
+double ScalpHairline::Weight(const Eigen::Vector3d& p) const {
+  // (azimuth °, height above the eye line mm), piecewise linear in |θ|.
+  static constexpr double kProfile[][2] = {{0, 62}, {20, 60}, {60, 40}, {80, 32}, {105, 32}, {125, -45}, {180, -45}};
+  const double theta = std::abs(std::atan2(p.x(), p.z() - ear_z)) * 180.0 / std::numbers::pi;
+  double h = kProfile[0][1];
+  for (size_t k = 0; k + 1 < std::size(kProfile); ++k) {
+    if (theta >= kProfile[k][0] && theta <= kProfile[k + 1][0]) {
+      const double t = (theta - kProfile[k][0]) / (kProfile[k + 1][0] - kProfile[k][0]);
+      h = kProfile[k][1] + t * (kProfile[k + 1][1] - kProfile[k][1]);
+    }
+  }
+  return SmoothStep(-1.5, 1.5, p.y() - eye_y - h);
+}
+
+ScalpHairline ScalpHairlineOf(const FaceRig& rig) {
+  auto lm = [&](int i) {
+    const int l = rig.LandmarkIndex(fmt::format("ibug_{}", i));
+    Require(l >= 0, fmt::format("{}: scalp hair needs the 68 iBUG landmarks (no ibug_{})", rig.source, i));
+    return Eigen::Vector3d(rig.neutral.V.row(rig.landmarks[l].vertex).transpose());
+  };
+  ScalpHairline h;
+  for (int i = 37; i <= 48; ++i) h.eye_y += lm(i).y() / 12.0;
+  h.ear_z = 0.5 * (lm(1).z() + lm(17).z());
+  return h;
+}
+
+namespace {
+
+// The scalp-hair weight of every texel of the rig's face chart (0 off the chart).
+cv::Mat ScalpHairMap(const FaceRig& rig, int size) {
+  const ScalpHairline line = ScalpHairlineOf(rig);
+  TriMesh chart = rig.neutral;
+  chart.F = FaceChartTriangles(rig);
+  chart.N.resize(0, 3);
+  const UvRaster raster = RasterizeUv(chart, size, size, "scalp hair: the rig's face chart");
+  const cv::Mat P = InterpolateToUv(raster, chart, chart.V);
+  cv::Mat w(size, size, CV_32F, cv::Scalar(0));
+  const cv::Mat covered = CoverageMask(raster);
+  for (int j = 0; j < size; ++j) {
+    for (int i = 0; i < size; ++i) {
+      if (!covered.at<uint8_t>(j, i)) continue;
+      const cv::Vec3f q = P.at<cv::Vec3f>(j, i);
+      w.at<float>(j, i) = static_cast<float>(line.Weight(Eigen::Vector3d(q[0], q[1], q[2])));
+    }
+  }
+  return w;
+}
+
+}  // namespace
+
 SkinMaps BuildSkinMaps(const FaceRig& rig, const FaceAnchors& a, const SkinParams& p, int size) {
   Require(size >= 8, fmt::format("BuildSkinMaps: size {} must be ≥ 8", size));
   Rng rng(p.seed);
@@ -232,40 +329,13 @@ SkinMaps BuildSkinMaps(const FaceRig& rig, const FaceAnchors& a, const SkinParam
   for (int k = 0; k < 2; ++k) {
     std::vector<Vec2> pts;
     for (const auto& b : a.brow[k]) pts.push_back(b - a.up * (kBrowDropMm / a.mm_per_uv));
-    if (pts.size() < 2) continue;
-    std::vector<double> arc(pts.size(), 0.0);
-    for (size_t b = 1; b < pts.size(); ++b) arc[b] = arc[b - 1] + (pts[b] - pts[b - 1]).norm();
-    if (arc.back() <= 0) continue;
-    Vec2 lo = pts[0], hi = pts[0];
-    for (const auto& q : pts) {
-      lo = lo.cwiseMin(q);
-      hi = hi.cwiseMax(q);
-    }
-    const double reach = (kBrowHalfInnerMm + 1.0) / a.mm_per_uv;
-    const int i0 = std::max(0, static_cast<int>((lo.x() - reach) * size));
-    const int i1 = std::min(size - 1, static_cast<int>((hi.x() + reach) * size) + 1);
-    const int j0 = std::max(0, static_cast<int>((lo.y() - reach) * size));
-    const int j1 = std::min(size - 1, static_cast<int>((hi.y() + reach) * size) + 1);
-    for (int j = j0; j <= j1; ++j) {
-      for (int i = i0; i <= i1; ++i) {
-        const Vec2 x((i + 0.5) / size, (j + 0.5) / size);
-        double best = 1e30, best_arc = 0;
-        for (size_t b = 0; b + 1 < pts.size(); ++b) {
-          const Vec2 e = pts[b + 1] - pts[b];
-          const double t = std::clamp((x - pts[b]).dot(e) / std::max(e.squaredNorm(), 1e-20), 0.0, 1.0);
-          const double d = (pts[b] + t * e - x).norm();
-          if (d < best) {
-            best = d;
-            best_arc = arc[b] + t * e.norm();
-          }
-        }
-        const double t = best_arc / arc.back();  // 0 outer, 1 inner
-        const double half = kBrowHalfOuterMm + (kBrowHalfInnerMm - kBrowHalfOuterMm) * t;  // mm
-        const double d_mm = best * a.mm_per_uv;
-        const double v = (1.0 - SmoothStep(half - 0.5, half + 0.5, d_mm)) * SmoothStep(0.0, 0.15, t);
-        brows.at<float>(j, i) = std::max(brows.at<float>(j, i), static_cast<float>(v));
-      }
-    }
+    cv::max(brows, PolylineStroke(pts, size, a.mm_per_uv, kBrowHalfOuterMm, kBrowHalfInnerMm, 0.15), brows);
+  }
+  // Lash line: the dark margin of the upper lid where the lashes root (the lashes
+  // themselves are not modelled), thickest at the outer corner.
+  cv::Mat lashes(size, size, CV_32F, cv::Scalar(0));
+  for (int k = 0; k < 2; ++k) {
+    cv::max(lashes, PolylineStroke(a.upper_lid[k], size, a.mm_per_uv, kLashHalfOuterMm, kLashHalfInnerMm, 0.0), lashes);
   }
   // Freckles: multiplicative density, denser on nose and cheeks.
   cv::Mat freckles(size, size, CV_32F, cv::Scalar(0));
@@ -286,6 +356,8 @@ SkinMaps BuildSkinMaps(const FaceRig& rig, const FaceAnchors& a, const SkinParam
   }
 
   SkinMaps maps;
+  const bool paint_hair = rig.PartIndex("hair") < 0 && rig.LandmarkIndex("ibug_68") >= 0;
+  maps.hair = paint_hair ? ScalpHairMap(rig, size) : cv::Mat(size, size, CV_32F, cv::Scalar(0));
   maps.albedo.create(size, size, CV_32FC3);
   maps.specular.create(size, size, CV_32F);
   maps.roughness.create(size, size, CV_32F);
@@ -321,17 +393,21 @@ SkinMaps BuildSkinMaps(const FaceRig& rig, const FaceAnchors& a, const SkinParam
       const double brow = brows.at<float>(j, i) * (0.6 + 0.4 * p.brow_darkness) *
                           std::clamp(0.8 + 0.3 * n_hair.at<float>(j, i), 0.0, 1.0);
       c = c + (hair - c) * (0.95 * brow);
+      c = c + (hair - c) * (0.9 * lashes.at<float>(j, i));
+      const double scalp = maps.hair.at<float>(j, i);
+      c = c + (hair * std::clamp(0.85 + 0.25 * n_hair.at<float>(j, i), 0.5, 1.3) - c) * scalp;
       for (int k = 0; k < 3; ++k) alb[i][k] = static_cast<float>(std::clamp(c[k], 0.005, 0.95));
       const double t = tzone.at<float>(j, i) * p.oiliness;
       const double ns = n_spec.at<float>(j, i);
       spec[i] = static_cast<float>(std::clamp(
-          p.specular * (0.75 + 0.7 * t + 0.25 * lips.at<float>(j, i)) * (1.0 + 0.12 * ns) * (1.0 - 0.5 * brow),
+          p.specular * (0.75 + 0.7 * t + 0.25 * lips.at<float>(j, i)) * (1.0 + 0.12 * ns) * (1.0 - 0.5 * std::max(brow, scalp)),
           0.05, 3.0));
       rough[i] = static_cast<float>(std::clamp(
-          p.roughness * (1.0 - 0.35 * t - 0.25 * lips.at<float>(j, i)) * (1.0 + 0.08 * ns) + 0.15 * brow, 0.1,
-          0.9));
+          p.roughness * (1.0 - 0.35 * t - 0.25 * lips.at<float>(j, i)) * (1.0 + 0.08 * ns) + 0.15 * (brow + scalp),
+          0.1, 0.9));
     }
   }
+  maps.hair_color = hair.cast<float>();
   return maps;
 }
 

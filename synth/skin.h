@@ -62,7 +62,28 @@ struct SkinMaps {
   cv::Mat albedo;     // CV_32FC3, linear RGB in [0, 1]
   cv::Mat specular;   // CV_32F, specular lobe weight (≈ 0.5–1.8)
   cv::Mat roughness;  // CV_32F, GGX α (≈ 0.2–0.55)
+  cv::Mat hair;       // CV_32F, weight of scalp hair painted on the chart (ScalpHairline), 0 = skin
+  Eigen::Vector3f hair_color = Eigen::Vector3f::Zero();  // its linear RGB (the brows' colour)
 };
+
+// Scalp hair for a head without a hair part (the ICT-FaceKit head is bald):
+// short-cropped hair on the scalp above a hairline, in the head frame (mm; x =
+// the subject's left, y up, z forward). The hairline's height above the eye line
+// (mean height of iBUG 37–48) depends on the azimuth θ about the vertical axis
+// through the ears (x = 0, z = mean z of iBUG 1 and 17): 62 mm at the front,
+// receding to 40 mm at the temples (60°), 32 mm over the ears (80–105°), down to
+// the nape (−45 mm) behind them (≥ 125°); linear in between, soft over ±1.5 mm.
+struct ScalpHairline {
+  double eye_y = 0.0;  // the eye line's height, mm
+  double ear_z = 0.0;  // the ears' depth, mm
+  // Hair weight in [0, 1] of a neutral head-frame point.
+  double Weight(const Eigen::Vector3d& p) const;
+};
+// From the rig's 68 iBUG landmarks (throws Error naming the rig without them).
+ScalpHairline ScalpHairlineOf(const FaceRig& rig);
+// The skin maps in the rig's UV layout. A rig with the 68 iBUG landmarks and
+// without a part named "hair" (a hair cap of its own, as the procedural head's)
+// gets scalp hair painted above its ScalpHairline (SkinMaps::hair).
 SkinMaps BuildSkinMaps(const FaceRig& rig, const FaceAnchors& anchors, const SkinParams& params, int size);
 
 // Random field helpers shared by the actor layers: white noise of `rng` on a

@@ -288,6 +288,7 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
   const cv::Scalar mean_albedo = cv::mean(materials.albedo, red > 0);
   const Eigen::Vector3f skin_tone(static_cast<float>(mean_albedo[0]), static_cast<float>(mean_albedo[1]),
                                   static_cast<float>(mean_albedo[2]));
+  const Eigen::Vector3f hair_tone = model_->skin().hair_color;
   {
     // Towards the seam the face's maps blend into the uniform material of the parts
     // it meets (the mean albedo, the nominal specular and roughness), so the seam
@@ -301,7 +302,9 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
         if (w >= 1.0f) continue;
         cv::Vec3f& a = materials.albedo.at<cv::Vec3f>(j, i);
         if (a[0] <= 0.0f) continue;  // outside the chart
-        for (int k = 0; k < 3; ++k) a[k] = w * a[k] + (1.0f - w) * skin_tone[k];
+        // The scalp's painted hair meets the part "scalp_hair", the rest the skin-toned parts.
+        const float h = model_->skin().hair.empty() ? 0.0f : model_->skin().hair.at<float>(j, i);
+        for (int k = 0; k < 3; ++k) a[k] = w * a[k] + (1.0f - w) * ((1.0f - h) * skin_tone[k] + h * hair_tone[k]);
         float& sp = materials.specular.at<float>(j, i);
         sp = w * sp + (1.0f - w) * nominal_specular;
         float& ro = materials.roughness.at<float>(j, i);
@@ -314,7 +317,10 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
   face.textured = true;
   materials.part_materials.push_back(face);
   for (const auto& name : rig.part_names) {
-    materials.part_materials.push_back(name == "face" ? face : PartMaterial(name, skin_tone));
+    Material m = name == "face" ? face : PartMaterial(name, skin_tone);
+    const bool painted_hair = !model_->skin().hair.empty() && cv::countNonZero(model_->skin().hair > 0.5f) > 0;
+    if (name == "scalp_hair" && painted_hair) m.albedo = hair_tone;  // the same colour as the chart's painted hair
+    materials.part_materials.push_back(m);
   }
   Material occluder = MaterialPreset("grey");
   occluder.textured = false;

@@ -213,8 +213,13 @@ FaceAnchors ComputeFaceAnchorsInner(const FaceRig& rig) {
     a.lower_lid[1] = mean(47, 48);
     for (int k = 18; k <= 22; ++k) a.brow[0].push_back(L(k));
     for (int k = 27; k >= 23; --k) a.brow[1].push_back(L(k));
+    for (int k = 37; k <= 40; ++k) a.upper_lid[0].push_back(L(k));
+    for (int k = 46; k >= 43; --k) a.upper_lid[1].push_back(L(k));
     for (int k = 0; k < 2; ++k) {
       if (away(a.brow[k].front()) < away(a.brow[k].back())) std::reverse(a.brow[k].begin(), a.brow[k].end());
+      if (away(a.upper_lid[k].front()) < away(a.upper_lid[k].back())) {
+        std::reverse(a.upper_lid[k].begin(), a.upper_lid[k].end());
+      }
     }
     a.nose_bridge_top = L(28);
     a.nose_bridge_bottom = L(30);

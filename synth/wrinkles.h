@@ -56,6 +56,7 @@ struct FaceAnchors {
   Eigen::Vector2d up;         // unit UV direction from the mouth towards the forehead
   Eigen::Vector2d eye_outer[2], eye_inner[2], eye_center[2], lower_lid[2];
   std::vector<Eigen::Vector2d> brow[2];  // outer → inner, along the brow
+  std::vector<Eigen::Vector2d> upper_lid[2];  // outer → inner corner along the upper lid margin (landmarks only)
   Eigen::Vector2d nose_bridge_top, nose_bridge_bottom, nose_tip;
   Eigen::Vector2d nose_wing[2];
   Eigen::Vector2d mouth_corner[2];
