@@ -250,7 +250,7 @@ cv::Mat BuildMesoscopicMap(const FaceRig& rig, const FaceAnchors& anchors, const
 
 double ScalpHairline::Weight(const Eigen::Vector3d& p) const {
   // (azimuth °, height above the eye line mm), piecewise linear in |θ|.
-  static constexpr double kProfile[][2] = {{0, 62}, {20, 60}, {60, 40}, {80, 32}, {105, 32}, {125, -45}, {180, -45}};
+  static constexpr double kProfile[][2] = {{0, 62}, {20, 60}, {60, 45}, {110, 45}, {130, -45}, {180, -45}};
   const double theta = std::abs(std::atan2(p.x(), p.z() - ear_z)) * 180.0 / std::numbers::pi;
   double h = kProfile[0][1];
   for (size_t k = 0; k + 1 < std::size(kProfile); ++k) {

@@ -71,8 +71,8 @@ struct SkinMaps {
 // the subject's left, y up, z forward). The hairline's height above the eye line
 // (mean height of iBUG 37–48) depends on the azimuth θ about the vertical axis
 // through the ears (x = 0, z = mean z of iBUG 1 and 17): 62 mm at the front,
-// receding to 40 mm at the temples (60°), 32 mm over the ears (80–105°), down to
-// the nape (−45 mm) behind them (≥ 125°); linear in between, soft over ±1.5 mm.
+// receding to 45 mm at the temples (60°) and over the ears (to 110°), down to the
+// nape (−45 mm) behind them (≥ 130°); linear in between, soft over ±1.5 mm.
 struct ScalpHairline {
   double eye_y = 0.0;  // the eye line's height, mm
   double ear_z = 0.0;  // the ears' depth, mm
