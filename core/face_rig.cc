@@ -252,7 +252,7 @@ void WriteRig(const fs::path& path, const FaceRig& rig, const RigWriteOptions& o
   for (auto& a : arrays) {
     json d = {{"name", a.desc.name}, {"dtype", a.desc.dtype}, {"shape", a.desc.shape}};
     if (a.desc.dtype == "i16") d["scale"] = a.desc.scale;
-    if (options.compact) {
+    if (options.compact || options.compress) {
       a.data = ZlibCompress(a.data, path.string());
       d["encoding"] = "zlib";
       d["stored_bytes"] = a.data.size();

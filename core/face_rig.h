@@ -95,6 +95,9 @@ struct RigWriteOptions {
   // basis exceeds ±32767 steps) and every array zlib-compressed.
   bool compact = false;
   double quantum_mm = 0.005;  // mm per step of the quantised deltas (error ≤ half a step)
+  // Lossless: every array zlib-compressed, the deltas kept as 32-bit floats (a
+  // dataset's rig, from which its ground truth is rebuilt bit for bit).
+  bool compress = false;
 };
 
 void WriteRig(const std::filesystem::path& path, const FaceRig& rig, const RigWriteOptions& options = {});

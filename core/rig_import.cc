@@ -288,6 +288,60 @@ void AddLandmarks(const std::vector<int>& ids, const std::string& what, FaceRig*
 
 }  // namespace
 
+FaceRig ExtractParts(const FaceRig& rig, const std::vector<std::string>& parts) {
+  Require(!rig.part_names.empty(), fmt::format("ExtractParts: {} has no parts", rig.source));
+  std::vector<int> new_part(rig.part_names.size(), -1);
+  FaceRig out;
+  for (const auto& name : parts) {
+    const int p = rig.PartIndex(name);
+    if (p < 0 || new_part[p] >= 0) continue;
+    new_part[p] = static_cast<int>(out.part_names.size());
+    out.part_names.push_back(name);
+  }
+  Require(out.PartIndex("face") >= 0, "ExtractParts: the part \"face\" must be kept");
+  const int nv = rig.num_vertices();
+  std::vector<int> map(static_cast<size_t>(nv), -1);
+  std::vector<int> kept;
+  for (int v = 0; v < nv; ++v) {
+    if (new_part[rig.vertex_part[v]] < 0) continue;
+    map[v] = static_cast<int>(kept.size());
+    kept.push_back(v);
+  }
+  const int n = static_cast<int>(kept.size());
+  out.neutral.V.resize(n, 3);
+  out.neutral.UV.resize(n, 2);
+  out.identity_basis.resize(3 * n, rig.num_identity());
+  out.expression_basis.resize(3 * n, rig.num_expressions());
+  for (int i = 0; i < n; ++i) {
+    const int v = kept[i];
+    out.neutral.V.row(i) = rig.neutral.V.row(v);
+    out.neutral.UV.row(i) = rig.neutral.UV.row(v);
+    out.identity_basis.middleRows(3 * i, 3) = rig.identity_basis.middleRows(3 * v, 3);
+    out.expression_basis.middleRows(3 * i, 3) = rig.expression_basis.middleRows(3 * v, 3);
+    out.vertex_part.push_back(static_cast<uint8_t>(new_part[rig.vertex_part[v]]));
+    out.original_vertex.push_back(rig.original_vertex.empty() ? v : rig.original_vertex[v]);
+  }
+  std::vector<Eigen::Vector3i> faces;
+  for (Eigen::Index f = 0; f < rig.neutral.F.rows(); ++f) {
+    const Eigen::Vector3i t = rig.neutral.F.row(f).transpose();
+    if (map[t[0]] >= 0 && map[t[1]] >= 0 && map[t[2]] >= 0) faces.emplace_back(map[t[0]], map[t[1]], map[t[2]]);
+  }
+  out.neutral.F.resize(static_cast<Eigen::Index>(faces.size()), 3);
+  for (size_t f = 0; f < faces.size(); ++f) out.neutral.F.row(static_cast<Eigen::Index>(f)) = faces[f].transpose();
+  for (const auto& l : rig.landmarks) {
+    Require(map[l.vertex] >= 0, fmt::format("ExtractParts: landmark '{}' lies in a part that is not kept", l.name));
+    out.landmarks.push_back({l.name, map[l.vertex]});
+  }
+  out.identity_names = rig.identity_names;
+  out.expression_names = rig.expression_names;
+  out.regions = rig.regions;
+  std::string kept_names;
+  for (const auto& name : out.part_names) kept_names += (kept_names.empty() ? "" : ", ") + name;
+  out.source = rig.source + "; parts " + kept_names;
+  out.Validate("ExtractParts");
+  return out;
+}
+
 FaceRig ImportObjRig(const fs::path& folder, const RigImportOptions& options, RigImportReport* report) {
   options.Check();
   RigImportReport local;
@@ -353,8 +407,10 @@ FaceRig ImportObjRig(const fs::path& folder, const RigImportOptions& options, Ri
         Require(r.end <= n_orig, fmt::format("part '{}': vertex range [{}, {}) exceeds the {} vertices of {}",
                                              options.parts[p].name, r.first, r.end, n_orig, neutral_path.string()));
         for (int v = r.first; v < r.end; ++v) {
-          Require(part_of_original[v] < 0, fmt::format("vertex {} is in two parts ('{}' and '{}')", v,
-                                                       options.parts[part_of_original[v]].name, options.parts[p].name));
+          if (part_of_original[v] >= 0) {
+            throw Error(fmt::format("vertex {} is in two parts ('{}' and '{}')", v,
+                                    options.parts[part_of_original[v]].name, options.parts[p].name));
+          }
           part_of_original[v] = static_cast<int>(p);
           in_region[v] = 1;
         }

@@ -60,6 +60,14 @@ std::vector<RigPart> ReadRigParts(const std::filesystem::path& path);
 // or text. 68 ids name "ibug_1" … "ibug_68". Errors name the spec or the file.
 std::vector<int> ParseLandmarkIds(const std::string& spec);
 
+// The rig restricted to the named parts (e.g. a face-only tracking rig of a full
+// head): their vertices, the triangles whose corners all lie in them, the same
+// identity and expression modes, UVs, regions and OBJ ids (original_vertex; filled
+// with the full rig's vertex ids when the rig has none). Parts not in the rig are
+// ignored. Throws Error when the rig has no parts, when "face" is not kept, or
+// when a landmark's vertex is dropped.
+FaceRig ExtractParts(const FaceRig& rig, const std::vector<std::string>& parts);
+
 struct RigImportOptions {
   double units_to_mm = 1.0;  // scale of the OBJ coordinates: 10 for cm, 1 for mm, 1000 for m
   // Face region as a half-open range [face_first, face_last) of OBJ vertex ids;

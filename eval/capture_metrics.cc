@@ -372,7 +372,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       fs::is_regular_file(actor_path) ? std::optional<Actor>(ReadActor(actor_path)) : std::nullopt;
   const FaceRig truth_motion = truth_actor ? PersonalRig(truth_rig, *truth_actor) : truth_rig;
   Eigen::VectorXd known_identity;  // the actor's α, when the tracking rig shares the truth's identity modes
-  if (truth_actor && corr.same_topology) {
+  if (truth_actor && corr.same_uv) {
     known_identity = truth_actor->identity;
     known_identity.conservativeResize(rig.num_identity());
     for (Eigen::Index k = truth_actor->identity.size(); k < known_identity.size(); ++k) known_identity[k] = 0.0;
@@ -502,7 +502,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     const fs::path d_path = capture / "displacement" / fmt::format("{:06d}.exr", index);
     cv::Mat band_err;
     cv::Mat D;
-    if (corr.same_topology && fs::is_regular_file(d_path)) {
+    if (corr.same_uv && fs::is_regular_file(d_path)) {
       D = ReadMap(d_path, R);
       const cv::Mat G = ReadMap(TruthMapPath(dataset, info, index), R, /*resample=*/true);
       e.has_displacement = true;

@@ -2,6 +2,8 @@
 
 #include <cmath>
 #include <limits>
+#include <map>
+#include <tuple>
 #include <Eigen/Geometry>
 #include <fmt/format.h>
 
@@ -74,6 +76,29 @@ Eigen::Matrix3Xd LandmarkPoints(const FaceRig& rig, const std::string& role) {
   return P;
 }
 
+// The tracking rig as a part of the truth's: each vertex the truth vertex with its
+// OBJ id and UV, as a degenerate "triangle" (v, v, v). False when one is missing.
+bool CorrespondAsPart(const FaceRig& tracking, const FaceRig& truth, RigCorrespondence* c) {
+  if (tracking.original_vertex.empty() || truth.original_vertex.empty()) return false;
+  std::map<std::tuple<int, double, double>, int> truth_vertex;
+  for (int v = 0; v < truth.num_vertices(); ++v) {
+    truth_vertex.emplace(std::tuple(truth.original_vertex[v], truth.neutral.UV(v, 0), truth.neutral.UV(v, 1)), v);
+  }
+  const int n = tracking.num_vertices();
+  c->corners.resize(n, 3);
+  c->triangle.resize(static_cast<size_t>(n));
+  c->barycentric = MatX3d::Zero(n, 3);
+  for (int v = 0; v < n; ++v) {
+    auto it = truth_vertex.find(std::tuple(tracking.original_vertex[v], tracking.neutral.UV(v, 0), tracking.neutral.UV(v, 1)));
+    if (it == truth_vertex.end() || (tracking.neutral.V.row(v) - truth.neutral.V.row(it->second)).norm() > 1e-6) return false;
+    c->corners.row(v) << it->second, it->second, it->second;
+    c->triangle[v] = v;
+    c->barycentric(v, 0) = 1.0;
+  }
+  c->matched = n;
+  return true;
+}
+
 }  // namespace
 
 RigCorrespondence CorrespondRigs(const FaceRig& tracking, const FaceRig& truth, const RigCorrespondenceOptions& options) {
@@ -83,6 +108,10 @@ RigCorrespondence CorrespondRigs(const FaceRig& tracking, const FaceRig& truth, 
     return c;
   }
   c.same_topology = false;
+  if (CorrespondAsPart(tracking, truth, &c)) return c;
+  c = RigCorrespondence();
+  c.same_topology = false;
+  c.same_uv = false;
   // 1. The similarity of the neutral heads from their landmarks.
   const Eigen::Matrix4d S = Eigen::umeyama(LandmarkPoints(tracking, "tracking"), LandmarkPoints(truth, "truth"), true);
   const Eigen::Matrix3d sR = S.topLeftCorner<3, 3>();

@@ -3,7 +3,8 @@
 // ICT-FaceKit dataset, an imported rig of a user's) is measured against the truth
 // by surface position, not by vertex index (issue 15).
 //
-// Same topology (equal vertex counts): vertex i is vertex i. Otherwise:
+// Same topology (equal vertex counts): vertex i is vertex i. A part of the truth
+// rig (every vertex's OBJ id and UV found in the truth's): vertex for vertex. Otherwise:
 //   1. the similarity (scale, rotation, translation; Umeyama) that maps the
 //      tracking rig's 68 neutral landmarks onto the truth rig's,
 //   2. each face-chart vertex of the tracking rig, so placed, finds the nearest
@@ -25,6 +26,10 @@ namespace crease {
 
 struct RigCorrespondence {
   bool same_topology = true;
+  // The tracking rig is a part of the truth's (ExtractParts: e.g. its face-only
+  // tracking rig): every vertex is a truth vertex with the same OBJ id and UV, in
+  // the same frame and UV layout, so UV maps (D^t) stay comparable.
+  bool same_uv = true;
   std::vector<int> triangle;  // per tracking vertex: the truth triangle's corners' row in `corners`, -1 = none
   MatX3i corners;             // the truth triangles used (truth vertex ids)
   MatX3d barycentric;         // per tracking vertex

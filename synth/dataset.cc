@@ -11,6 +11,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/error.h"
+#include "core/rig_import.h"
 #include "core/file_util.h"
 #include "core/image_io.h"
 #include "core/json_io.h"
@@ -94,6 +95,20 @@ Eigen::VectorXd ParseExpressionSpec(const std::string& spec, const FaceRig& rig)
   return Eigen::Map<const Eigen::VectorXd>(w.data(), static_cast<Eigen::Index>(w.size()));
 }
 
+namespace {
+
+// Writes `rig` restricted to `parts` to `path` when that drops vertices; returns
+// whether it did.
+bool WriteTrackingRig(const FaceRig& rig, const std::vector<std::string>& parts, const fs::path& path) {
+  if (parts.empty() || rig.part_names.empty() || rig.PartIndex("face") < 0) return false;
+  const FaceRig tracking = ExtractParts(rig, parts);
+  if (tracking.num_vertices() == rig.num_vertices()) return false;
+  WriteRig(path, tracking, {.compress = true});
+  return true;
+}
+
+}  // namespace
+
 DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const Sequence& input_sequence,
                                    const SequenceDatasetOptions& options, const fs::path& out) {
   input_sequence.Validate(input_sequence.name);
@@ -123,7 +138,8 @@ DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const
   const auto start = std::chrono::steady_clock::now();
   WriteFolderAtomic(out, options.overwrite, [&](const fs::path& dir) {
     const Studio studio(rig, actor, options.studio);
-    WriteRig(dir / "rig.crig", rig);
+    WriteRig(dir / "rig.crig", rig, {.compress = true});
+    const bool tracking_rig = WriteTrackingRig(rig, options.tracking_parts, dir / "tracking_rig.crig");
     WriteActor(dir / "actor.json", actor);
     WriteFileAtomic(dir / "sequence.yaml", [&](std::ostream& o) { o << SequenceToYaml(sequence); });
     WriteCamera(dir / "camera.json", Camera(studio.camera().intrinsics, studio.camera().cam_from_head));
@@ -185,6 +201,7 @@ DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const
     ds["width"] = options.studio.width;
     ds["height"] = options.studio.height;
     ds["rig"] = "rig.crig";
+    if (tracking_rig) ds["tracking_rig"] = "tracking_rig.crig";
     ds["actor"] = "actor.json";
     ds["camera"] = "camera.json";
     ds["studio"] = json::parse(OptionsToJson(options.studio));
@@ -222,7 +239,7 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
   report.path = out.string();
   const auto start = std::chrono::steady_clock::now();
   WriteFolderAtomic(out, options.overwrite, [&](const fs::path& dir) {
-    WriteRig(dir / "rig.crig", rig);
+    WriteRig(dir / "rig.crig", rig, {.compress = true});
     json index;
     index["format"] = "crease scan set";
     index["version"] = 2;

@@ -3,7 +3,11 @@
 // Sequence dataset (`crease synth sequence`):
 //   dataset.json      what is here: format, version, frame count, fps, image size,
 //                     the studio options, and the file layout below
-//   rig.crig          the rig (core/face_rig.h)
+//   rig.crig          the generic rig (core/face_rig.h; zlib, lossless): the truth moves with
+//                     PersonalRig(rig, actor), the actor's own expressions
+//   tracking_rig.crig the rig's skin parts only (SequenceDatasetOptions::tracking_parts),
+//                     which `crease track` and `crease capture` fit by default
+//                     (dataset.json "tracking_rig"; absent when nothing is dropped)
 //   actor.json        the actor definition (synth/actor.h): with the rig, enough to
 //                     rebuild every layer of every frame
 //   sequence.yaml     the performance (synth/sequence.h)
@@ -57,6 +61,12 @@ struct SequenceDatasetOptions {
   // Drop sequence channels for expressions the rig lacks (with a warning in the
   // report) instead of failing — for built-in presets on rigs with fewer expressions.
   bool ignore_missing_expressions = false;
+  // The parts of the tracking rig written beside the dataset (tracking_rig.crig,
+  // ExtractParts: the skin of the head without eyes, teeth, gums and mouth
+  // interior, which the tracker never fits), when they drop any vertex; the
+  // dataset's generic rig.crig stays the truth's. Empty: no tracking rig.
+  std::vector<std::string> tracking_parts = {"face", "face_rim", "head_neck", "scalp_hair",
+                                             "cranium", "hair", "neck", "ears"};
 };
 
 struct DatasetReport {

@@ -143,6 +143,12 @@ TEST(FaceRig, CompactFileKeepsDeltasWithinHalfAStep) {
   EXPECT_LE((back.expression_basis - rig.expression_basis).cwiseAbs().maxCoeff(), 0.5 * compact.quantum_mm + 1e-6);
   EXPECT_EQ(back.expression_basis.col(1).cwiseAbs().maxCoeff(), 0.0f);
   EXPECT_LT(fs::file_size(dir / "compact.crig"), fs::file_size(dir / "raw.crig"));
+  // Lossless compression keeps every float.
+  RigWriteOptions lossless;
+  lossless.compress = true;
+  WriteRig(dir / "lossless.crig", rig, lossless);
+  EXPECT_EQ(ReadRig(dir / "lossless.crig").expression_basis, rig.expression_basis);
+  EXPECT_EQ(ReadRig(dir / "lossless.crig").identity_basis, rig.identity_basis);
   // A basis beyond ±32767 steps gets a coarser step instead of overflowing.
   rig.expression_basis(0, 0) = 400.0f;
   WriteRig(dir / "big.crig", rig, compact);
@@ -204,6 +210,18 @@ TEST(RigImport, MultiPartHeadKeepsEveryPartOnItsOwnUvTile) {
   ASSERT_EQ(rig.landmarks.size(), 68u);
   EXPECT_EQ(rig.original_vertex[rig.landmarks[0].vertex], lms[0].get<int>());
   EXPECT_EQ(report.part_vertices.size(), 2u);
+
+  // A part of it (a face-only tracking rig): the face's vertices, OBJ ids and UVs.
+  EXPECT_ERROR_HAS(ExtractParts(rig, {"face"}), "lies in a part that is not kept");
+  FaceRig unlabelled = rig;
+  unlabelled.landmarks.clear();
+  const FaceRig face = ExtractParts(unlabelled, {"face", "no such part"});
+  EXPECT_EQ(face.part_names, std::vector<std::string>{"face"});
+  EXPECT_EQ(face.neutral.num_faces(), FaceChartTriangles(rig).rows());
+  EXPECT_EQ(face.num_identity(), rig.num_identity());
+  for (int v = 0; v < face.num_vertices(); ++v) EXPECT_LT(face.original_vertex[v], 1107);
+  EXPECT_EQ(ExtractParts(rig, {"neck", "face"}).num_vertices(), rig.num_vertices());
+  EXPECT_ERROR_HAS(ExtractParts(rig, {"neck"}), "the part \"face\" must be kept");
 
   // Bad parts files name the file and the problem.
   WriteText(parts, R"J([{"name": "face", "vertices": "[0, 100]"}, {"name": "neck", "vertices": "[100, 200]"}])J");

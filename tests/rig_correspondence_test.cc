@@ -13,13 +13,16 @@ namespace {
 
 using testing::SampleRig;
 
-// The sample rig without its last row of vertices: another topology on the same
-// surface, so every vertex's correspondence must give back its own position.
+// The sample rig without its last row of vertices and with shifted UVs: another
+// topology and UV layout on the same surface (not a part of the sample rig), so
+// every vertex's correspondence must give back its own position.
 FaceRig CroppedSampleRig() {
   RigImportOptions o;
   o.units_to_mm = 10.0;
   o.face_last = 41 * 52;
-  return ImportObjRig(std::filesystem::path(CREASE_DATA_DIR) / "sample_rig", o);
+  FaceRig rig = ImportObjRig(std::filesystem::path(CREASE_DATA_DIR) / "sample_rig", o);
+  rig.neutral.UV.array() *= 0.99;
+  return rig;
 }
 
 TEST(RigCorrespondence, SameSurfaceMapsEveryVertexOntoItself) {
@@ -28,6 +31,7 @@ TEST(RigCorrespondence, SameSurfaceMapsEveryVertexOntoItself) {
   ASSERT_NE(tracking.num_vertices(), truth.num_vertices());
   const RigCorrespondence c = CorrespondRigs(tracking, truth);
   EXPECT_FALSE(c.same_topology);
+  EXPECT_FALSE(c.same_uv);
   EXPECT_NEAR(c.scale, 1.0, 1e-6);
   // Rays along the normal from the surface's own border may slip past its edge.
   EXPECT_GT(c.matched, tracking.num_vertices() * 8 / 10);
@@ -59,6 +63,22 @@ TEST(RigCorrespondence, SameSurfaceMapsEveryVertexOntoItself) {
   FaceRig no_landmarks = tracking;
   no_landmarks.landmarks.clear();
   EXPECT_ERROR_HAS(CorrespondRigs(no_landmarks, truth), "no landmark 'ibug_1'");
+}
+
+TEST(RigCorrespondence, APartOfTheTruthRigMapsVertexForVertex) {
+  const FaceRig truth = BuildIctStudioRig(ReadRig(VendoredIctRigPath()));
+  const FaceRig tracking = ExtractParts(truth, {"face", "face_rim", "head_neck", "scalp_hair"});
+  ASSERT_LT(tracking.num_vertices(), truth.num_vertices() * 2 / 3);  // eyes, teeth, gums, mouth gone
+  const RigCorrespondence c = CorrespondRigs(tracking, truth);
+  EXPECT_FALSE(c.same_topology);
+  EXPECT_TRUE(c.same_uv);
+  EXPECT_EQ(c.matched, tracking.num_vertices());
+  Eigen::VectorXd e = Eigen::VectorXd::Zero(truth.num_expressions());
+  e[truth.ExpressionIndex("jawOpen")] = 0.6;
+  e[truth.ExpressionIndex("mouthSmile_L")] = 1.0;
+  const Eigen::MatrixXd mapped = c.Map(truth.EvaluatePositions({}, e));
+  EXPECT_LT((mapped - Eigen::MatrixXd(tracking.EvaluatePositions({}, e))).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_EQ(c.ToTrackingFrame(tracking.neutral.V), tracking.neutral.V);
 }
 
 TEST(RigCorrespondence, ProceduralHeadOnTheIctHead) {

@@ -90,7 +90,7 @@ void AddCaptureCommands(CLI::App& app) {
     const bool dataset = info.kind == "dataset";
     if (tf.rig_path.empty()) {
       Require(dataset, "--rig is required unless the input is a crease dataset");
-      tf.rig_path = (info.path / "rig.crig").string();
+      tf.rig_path = DatasetTrackingRig(info.path);
     }
     const CameraIntrinsics K = ResolveIntrinsics(tf.camera_path, info, tf.fov);
     const DetailModel model = ReadDetailModel(model_path);

@@ -185,6 +185,34 @@ void AddRigCommands(CLI::App& app) {
     });
   }
 
+  // rig extract
+  {
+    auto* cmd = rig_cmd->add_subcommand("extract", "Keep only some parts of a multi-part rig (e.g. a face-only "
+                                                  "tracking rig of a full head)");
+    static std::string in, out, parts;
+    cmd->add_option("RIG", in, "Rig (.crig) with parts")->required();
+    cmd->add_option("--parts", parts, "Parts to keep, comma-separated (must include face)")->required();
+    cmd->add_option("--out,-o", out, "Output rig (.crig)")->required();
+    cmd->callback([] {
+      std::vector<std::string> names;
+      std::string name;
+      for (const char c : parts + ",") {
+        if (c != ',') {
+          name.push_back(c);
+        } else if (!name.empty()) {
+          names.push_back(name);
+          name.clear();
+        }
+      }
+      const FaceRig rig = ReadRig(in);
+      const FaceRig part = ExtractParts(rig, names);
+      WriteRig(out, part, {.compact = true});
+      std::printf("wrote %s: %d of %d vertices, %d of %d triangles, parts %zu of %zu\n", out.c_str(),
+                  part.num_vertices(), rig.num_vertices(), part.neutral.num_faces(), rig.neutral.num_faces(),
+                  part.part_names.size(), rig.part_names.size());
+    });
+  }
+
   // rig info
   {
     auto* cmd = rig_cmd->add_subcommand("info", "Describe a rig: sizes, expressions, landmarks, regions");

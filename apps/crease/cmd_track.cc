@@ -50,7 +50,7 @@ void AddTrackCommand(CLI::App& app) {
     const bool dataset = info.kind == "dataset";
     if (tf.rig_path.empty()) {
       Require(dataset, "--rig is required unless the input is a crease dataset");
-      tf.rig_path = (info.path / "rig.crig").string();
+      tf.rig_path = DatasetTrackingRig(info.path);
     }
     const FaceRig rig = ReadRig(tf.rig_path);
     const CameraIntrinsics K = ResolveIntrinsics(tf.camera_path, info, tf.fov);

@@ -8,6 +8,7 @@
 
 #include "core/color.h"
 #include "core/error.h"
+#include "core/json_io.h"
 #include "eval/tracking_metrics.h"
 
 namespace crease::app {
@@ -147,6 +148,17 @@ void DrawTracking(const TrackedFrame& t, const MatX2d& projected, const MatX3i& 
   cv::putText(*bgr, fmt::format("{} {:.2f}", t.tracked ? "tracked" : "lost", t.confidence), cv::Point(8, 18),
               cv::FONT_HERSHEY_SIMPLEX, 0.5, t.tracked ? cv::Scalar(60, 220, 60) : cv::Scalar(40, 40, 230), 1,
               cv::LINE_AA);
+}
+
+std::string DatasetTrackingRig(const std::filesystem::path& dataset) {
+  const std::filesystem::path json_path = dataset / "dataset.json";
+  if (std::filesystem::is_regular_file(json_path)) {
+    const nlohmann::json j = ReadJsonFile(json_path);
+    if (j.is_object() && j.contains("tracking_rig") && j["tracking_rig"].is_string()) {
+      return (dataset / j["tracking_rig"].get<std::string>()).string();
+    }
+  }
+  return (dataset / "rig.crig").string();
 }
 
 }  // namespace crease::app

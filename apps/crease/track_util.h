@@ -74,4 +74,9 @@ cv::Mat PreviewBgr(const cv::Mat& linear_rgb);
 // face chart triangles, and the tracking state onto `bgr`.
 void DrawTracking(const TrackedFrame& t, const MatX2d& projected, const MatX3i& face_F, cv::Mat* bgr);
 
+// The rig a dataset is tracked with by default: its tracking_rig.crig when
+// dataset.json lists one (the generic rig without the parts a tracker never fits),
+// else its rig.crig.
+std::string DatasetTrackingRig(const std::filesystem::path& dataset);
+
 }  // namespace crease::app
