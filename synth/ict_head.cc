@@ -38,6 +38,13 @@ int RequirePart(const FaceRig& rig, const std::string& name) {
   return p;
 }
 
+// Moves vertex v to part `to`, onto that part's own UV tile (u in [2 + p, 3 + p),
+// as core/rig_import.h lays out the non-face parts).
+void MoveToPart(FaceRig* rig, int v, int to) {
+  rig->neutral.UV(v, 0) += to - rig->vertex_part[v];
+  rig->vertex_part[v] = static_cast<uint8_t>(to);
+}
+
 // The eye of one side, as the model builds it: a sclera sphere that also covers
 // the cornea (a game engine makes that cap transparent), and an "iris" mesh
 // inside it whose front is the iris disc and whose back lines the eyeball.
@@ -74,8 +81,7 @@ void DressEye(FaceRig* rig, const std::string& side, const IctHeadOptions& optio
     if (in_front(v) && axis_distance(v) < options.iris_radius_mm) {
       to = axis_distance(v) < options.pupil_radius_mm ? pupil : iris;
     }
-    rig->vertex_part[v] = static_cast<uint8_t>(to);
-    rig->neutral.UV(v, 0) += to - part;  // the part's own UV tile (u in [2 + p, 3 + p))
+    MoveToPart(rig, v, to);
   }
 }
 
@@ -102,8 +108,7 @@ void HairOnTheScalp(FaceRig* rig) {
   for (int v = 0; v < rig->num_vertices(); ++v) {
     const int part = rig->vertex_part[v];
     if ((part != head && part != rim) || line.Weight(rig->neutral.V.row(v).transpose()) < 0.5) continue;
-    rig->vertex_part[v] = static_cast<uint8_t>(hair);
-    rig->neutral.UV(v, 0) += hair - part;  // the part's own UV tile
+    MoveToPart(rig, v, hair);
   }
 }
 

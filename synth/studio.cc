@@ -289,6 +289,7 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
   const Eigen::Vector3f skin_tone(static_cast<float>(mean_albedo[0]), static_cast<float>(mean_albedo[1]),
                                   static_cast<float>(mean_albedo[2]));
   const Eigen::Vector3f hair_tone = model_->skin().hair_color;
+  const cv::Mat& painted_hair_map = model_->skin().hair;
   {
     // Towards the seam the face's maps blend into the uniform material of the parts
     // it meets (the mean albedo, the nominal specular and roughness), so the seam
@@ -303,7 +304,7 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
         cv::Vec3f& a = materials.albedo.at<cv::Vec3f>(j, i);
         if (a[0] <= 0.0f) continue;  // outside the chart
         // The scalp's painted hair meets the part "scalp_hair", the rest the skin-toned parts.
-        const float h = model_->skin().hair.empty() ? 0.0f : model_->skin().hair.at<float>(j, i);
+        const float h = painted_hair_map.empty() ? 0.0f : painted_hair_map.at<float>(j, i);
         for (int k = 0; k < 3; ++k) a[k] = w * a[k] + (1.0f - w) * ((1.0f - h) * skin_tone[k] + h * hair_tone[k]);
         float& sp = materials.specular.at<float>(j, i);
         sp = w * sp + (1.0f - w) * nominal_specular;
@@ -316,9 +317,9 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
   Material face = MaterialPreset("skin");
   face.textured = true;
   materials.part_materials.push_back(face);
+  const bool painted_hair = !model_->skin().hair.empty() && cv::countNonZero(model_->skin().hair > 0.5f) > 0;
   for (const auto& name : rig.part_names) {
     Material m = name == "face" ? face : PartMaterial(name, skin_tone);
-    const bool painted_hair = !model_->skin().hair.empty() && cv::countNonZero(model_->skin().hair > 0.5f) > 0;
     if (name == "scalp_hair" && painted_hair) m.albedo = hair_tone;  // the same colour as the chart's painted hair
     materials.part_materials.push_back(m);
   }

@@ -1,9 +1,5 @@
 #include "synth/studio_rig.h"
 
-#include <fmt/format.h>
-
-#include "core/error.h"
-
 namespace crease {
 
 void StudioRigOptions::VisitFields(OptionVisitor& v) {
@@ -14,8 +10,7 @@ void StudioRigOptions::VisitFields(OptionVisitor& v) {
 }
 
 void StudioRigOptions::Check() const {
-  Require(head == "ict" || head == "procedural",
-          fmt::format("StudioRigOptions: head = '{}' must be \"ict\" or \"procedural\"", head));
+  CheckOneOf("StudioRigOptions", "head", head, {"ict", "procedural"});
   ict.Check();
   procedural.Check();
 }

@@ -194,18 +194,8 @@ void AddRigCommands(CLI::App& app) {
     cmd->add_option("--parts", parts, "Parts to keep, comma-separated (must include face)")->required();
     cmd->add_option("--out,-o", out, "Output rig (.crig)")->required();
     cmd->callback([] {
-      std::vector<std::string> names;
-      std::string name;
-      for (const char c : parts + ",") {
-        if (c != ',') {
-          name.push_back(c);
-        } else if (!name.empty()) {
-          names.push_back(name);
-          name.clear();
-        }
-      }
       const FaceRig rig = ReadRig(in);
-      const FaceRig part = ExtractParts(rig, names);
+      const FaceRig part = ExtractParts(rig, SplitComma(parts));
       WriteRig(out, part, {.compact = true});
       std::printf("wrote %s: %d of %d vertices, %d of %d triangles, parts %zu of %zu\n", out.c_str(),
                   part.num_vertices(), rig.num_vertices(), part.neutral.num_faces(), rig.neutral.num_faces(),

@@ -41,17 +41,6 @@ void ParseSize(const std::string& size, StudioOptions* studio) {
   }
 }
 
-std::vector<std::string> SplitComma(const std::string& s) {
-  std::vector<std::string> out;
-  size_t start = 0;
-  while (start <= s.size()) {
-    const size_t end = std::min(s.find(',', start), s.size());
-    if (end > start) out.push_back(s.substr(start, end - start));
-    start = end + 1;
-  }
-  return out;
-}
-
 Actor LoadOrGenerateActor(const FaceRig& rig, const std::string& actor_file, uint64_t seed) {
   return actor_file.empty() ? GenerateActor(rig, seed) : ReadActor(actor_file);
 }

@@ -14,6 +14,9 @@ namespace crease::app {
 // otherwise taken as a string.
 std::string SetPairsToJson(const std::vector<std::string>& pairs);
 
+// "a,b,,c" → {"a", "b", "c"} (empty items dropped).
+std::vector<std::string> SplitComma(const std::string& s);
+
 void AddVersionCommand(CLI::App& app);
 void AddMeshCommands(CLI::App& app);
 void AddRigCommands(CLI::App& app);
