@@ -38,11 +38,17 @@ struct RealismCheckOptions {
   void Check() const;
 };
 
+inline constexpr double kNoFaceScore = -1.5;
+
 struct RealismCheckRow {
   uint64_t actor_seed = 0;
   std::string light, expression;
   double yaw_deg = 0;
   bool detected = false;
+  // The HOG detector's best score for a box holding this face, also when it is
+  // below the detection threshold (0): how far a missed face is from being found.
+  // kNoFaceScore when no box down to that floor holds the face.
+  double score = 0;
   double error_px = 0, error_inner_px = 0;     // mean point-to-point error (detected frames)
   double error_iod = 0, error_inner_iod = 0;   // same / inter-ocular distance
   double iod_px = 0;

@@ -309,12 +309,15 @@ void AddSynthDatasetCommands(CLI::App& app) {
   {
     auto* cmd = synth->add_subcommand("check", "Realism check: dlib's face detector and 68-point landmarks on renders");
     static std::string rig_path, json_out, samples_dir, lights;
+    static std::vector<double> yaws;
     static int actors = 4;
     static uint64_t seed = 1;
     cmd->add_option("--rig", rig_path, "Rig (.crig)")->required();
     cmd->add_option("--actors", actors, "Number of actors")->capture_default_str();
     cmd->add_option("--seed", seed, "First actor seed")->capture_default_str();
     cmd->add_option("--lights", lights, "Light rigs, comma-separated (default front,studio,raking-side)");
+    cmd->add_option("--yaws", yaws, "Head yaws in degrees, comma-separated (default 0,25; positive turns the face towards raking-side's light)")
+        ->delimiter(',');
     cmd->add_option("--samples", samples_dir, "Write every frame with true (green) and detected (red) landmarks here");
     cmd->add_option("--json", json_out, "Write the report as JSON");
     cmd->callback([] {
@@ -323,6 +326,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
       o.actors = actors;
       o.seed = seed;
       if (!lights.empty()) o.lights = SplitComma(lights);
+      if (!yaws.empty()) o.yaws_deg = yaws;
       o.samples_dir = samples_dir;
       const RealismCheckReport r = RunRealismCheck(rig, o);
       std::printf("%s", r.ToTable().c_str());
