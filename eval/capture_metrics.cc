@@ -327,6 +327,108 @@ class RigPriorFit {
 
 }  // namespace
 
+namespace {
+
+// Sums of errors over points → means (each over the points it summed).
+void DivideByCounts(FlowStageErrors* e) {
+  auto mean = [](double* sum, int count) { *sum = count > 0 ? *sum / count : 0.0; };
+  mean(&e->coarse_px, e->points);
+  mean(&e->flow_px, e->points);
+  mean(&e->fit_px, e->points);
+  mean(&e->refined_px, e->points);
+  mean(&e->trusted_px, e->trusted);
+  mean(&e->trusted_coarse_px, e->trusted);
+  mean(&e->recovered_px, e->recovered);
+  mean(&e->recovered_coarse_px, e->recovered);
+  mean(&e->reset_px, e->reset);
+}
+
+}  // namespace
+
+FlowStageErrors MeasureFlowStages(const CaptureFrameArrays& arrays, const Camera& camera, const MatX2d& truth_px,
+                                  const std::vector<char>& truth_visible, const std::vector<char>& on_face) {
+  FlowStageErrors e;
+  const int n = static_cast<int>(arrays.flow_vertex.size());
+  for (int i = 0; i < n; ++i) {
+    const int v = arrays.flow_vertex[i];
+    const auto status = static_cast<FlowPointStatus>(arrays.flow_status[i]);
+    if (status == FlowPointStatus::kInvisible || !on_face[v] || !truth_visible[v]) continue;
+    const Eigen::RowVector2d t = truth_px.row(v);
+    const double coarse = (arrays.flow_projected.row(i) - t).norm();
+    const double flow = (arrays.flow_positions.row(i) - t).norm();
+    const double fit = (arrays.flow_fitted.row(i) - t).norm();
+    const double refined = (camera.ProjectCamPoint(arrays.refined.row(v).transpose()).transpose() - t).norm();
+    if (!(std::isfinite(coarse) && std::isfinite(flow) && std::isfinite(fit) && std::isfinite(refined))) continue;
+    ++e.points;
+    e.coarse_px += coarse;
+    e.flow_px += flow;
+    e.fit_px += fit;
+    e.refined_px += refined;
+    if (status == FlowPointStatus::kTrusted) {
+      ++e.trusted;
+      e.trusted_px += flow;
+      e.trusted_coarse_px += coarse;
+    } else if (status == FlowPointStatus::kRecovered) {
+      ++e.recovered;
+      e.recovered_px += flow;
+      e.recovered_coarse_px += coarse;
+    } else {
+      ++e.reset;
+      e.reset_px += flow;
+    }
+  }
+  DivideByCounts(&e);
+  return e;
+}
+
+namespace {
+
+// Pools the frames' flow-stage errors over their points (a frame's mean weighs by
+// its point count); counts are means per frame.
+FlowStageErrors PoolFlowStages(const std::vector<FrameCaptureEval>& frames, int* flow_frames) {
+  FlowStageErrors p;
+  int n = 0;
+  for (const FrameCaptureEval& e : frames) {
+    if (!e.tracked || !e.has_flow) continue;
+    const FlowStageErrors& f = e.flow;
+    ++n;
+    p.points += f.points;
+    p.trusted += f.trusted;
+    p.recovered += f.recovered;
+    p.reset += f.reset;
+    p.coarse_px += f.coarse_px * f.points;
+    p.flow_px += f.flow_px * f.points;
+    p.fit_px += f.fit_px * f.points;
+    p.refined_px += f.refined_px * f.points;
+    p.trusted_px += f.trusted_px * f.trusted;
+    p.trusted_coarse_px += f.trusted_coarse_px * f.trusted;
+    p.recovered_px += f.recovered_px * f.recovered;
+    p.recovered_coarse_px += f.recovered_coarse_px * f.recovered;
+    p.reset_px += f.reset_px * f.reset;
+  }
+  DivideByCounts(&p);
+  if (n > 0) {
+    p.points /= n;
+    p.trusted /= n;
+    p.recovered /= n;
+    p.reset /= n;
+  }
+  *flow_frames = n;
+  return p;
+}
+
+json FlowStagesJson(const FlowStageErrors& f) {
+  return {{"points", f.points},           {"trusted", f.trusted},
+          {"recovered", f.recovered},     {"reset", f.reset},
+          {"coarse_px", f.coarse_px},     {"flow_px", f.flow_px},
+          {"fit_px", f.fit_px},           {"refined_px", f.refined_px},
+          {"trusted_px", f.trusted_px},   {"trusted_coarse_px", f.trusted_coarse_px},
+          {"recovered_px", f.recovered_px}, {"recovered_coarse_px", f.recovered_coarse_px},
+          {"reset_px", f.reset_px}};
+}
+
+}  // namespace
+
 CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& dataset,
                                    const CaptureEvalOptions& options) {
   options.Check();
@@ -456,6 +558,12 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       visible.push_back(i);
     }
     e.visible_vertices = static_cast<int>(visible.size());
+    if (!arrays.flow_vertex.empty()) {
+      std::vector<char> evaluated(static_cast<size_t>(rig.num_vertices()), 0);
+      for (int i : face_ids) evaluated[i] = 1;
+      e.flow = MeasureFlowStages(arrays, cam, truth.vertices, truth.vertex_visible, evaluated);
+      e.has_flow = e.flow.points > 0;
+    }
     e.true_visible_fraction = visible_fraction(truth.vertex_visible);
     if (!visible.empty()) {
       e.coarse_px = sc / visible.size();
@@ -594,6 +702,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
 
   // Means.
   s.frames = static_cast<int>(s.per_frame.size());
+  s.flow = PoolFlowStages(s.per_frame, &s.flow_frames);
   int jitter_frames = 0, d_jitter_frames = 0;
   for (const FrameCaptureEval& e : s.per_frame) {
     if (!e.tracked) continue;
@@ -669,7 +778,13 @@ std::string CaptureEvalSummary::ToJson() const {
                    {"coarse_jitter_px", coarse_jitter_px},
                    {"refined_jitter_px", refined_jitter_px},
                    {"prior_px", prior_px},
-                   {"prior_mm", prior_mm}};
+                   {"prior_mm", prior_mm},
+                   // What the refinement adds to the 2D error (px), and the ratio (the
+                   // claims of tracking-refinement: no worse than + 0.1 px with a good
+                   // tracker, ≤ 0.85 under model error).
+                   {"refined_excess_px", refined_px - coarse_px},
+                   {"refined_ratio", coarse_px > 0 ? refined_px / coarse_px : 0.0}};
+  j["refinement_stages"] = flow_frames > 0 ? FlowStagesJson(flow) : json(nullptr);
   j["displacement"] = {{"frames", displacement_frames},
                        {"active_frames", active_frames},
                        {"face", ComparisonJson(d_face)},
@@ -710,6 +825,7 @@ std::string CaptureEvalSummary::ToJson() const {
       f["refined_jitter_px"] = e.refined_jitter_px;
       f["prior_px"] = e.prior_px;
       f["prior_mm"] = e.prior_mm;
+      if (e.has_flow) f["refinement_stages"] = FlowStagesJson(e.flow);
       if (e.has_displacement) {
         f["displacement"] = {{"face", ComparisonJson(e.d_face)},
                              {"wrinkle_regions", ComparisonJson(e.d_wrinkle)},
@@ -775,6 +891,23 @@ std::string CaptureEvalSummary::ToMarkdown() const {
   o << fmt::format("Prior error (the tracking rig's best least-squares fit to the true coarse mesh at the true "
                    "identity, the model error a blendshape prior cannot remove): {:.2f} px, {:.2f} mm\n\n",
                    prior_px, prior_mm);
+  if (flow_frames > 0) {
+    o << fmt::format("### Refinement steps at the flow points (Sec. 5.1), {} frames, {} points per frame\n\n"
+                     "2D error against the true projections, px; beside each status, the error of u^t at the same "
+                     "points.\n\n| step | points per frame | error, px | u^t at the same points, px |\n"
+                     "|---|---|---|---|\n",
+                     flow_frames, flow.points);
+    o << fmt::format("| u^t (projection of L^t) | {} | {:.2f} | |\n", flow.points, flow.coarse_px);
+    o << fmt::format("| ũ^t trusted (LK, passed ξ_α and ξ_β) | {} | {:.2f} | {:.2f} |\n", flow.trusted,
+                     flow.trusted_px, flow.trusted_coarse_px);
+    o << fmt::format("| ũ^t recovered (MLS) | {} | {:.2f} | {:.2f} |\n", flow.recovered, flow.recovered_px,
+                     flow.recovered_coarse_px);
+    o << fmt::format("| ũ^t reset to u^t | {} | {:.2f} | |\n", flow.reset, flow.reset_px);
+    o << fmt::format("| ũ^t, all | {} | {:.2f} | {:.2f} |\n", flow.points, flow.flow_px, flow.coarse_px);
+    o << fmt::format("| 3D fit F | {} | {:.2f} | {:.2f} |\n", flow.points, flow.fit_px, flow.coarse_px);
+    o << fmt::format("| L~^t (F + Laplacian deformation) | {} | {:.2f} | {:.2f} |\n\n", flow.points,
+                     flow.refined_px, flow.coarse_px);
+  }
   if (displacement_frames > 0) {
     o << fmt::format("## Displacement D^t (paper Sec. 5.2): {} frames, {} with wrinkles (pooled below)\n\n",
                      displacement_frames, active_frames);

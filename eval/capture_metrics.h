@@ -34,6 +34,8 @@
 #include <string>
 #include <vector>
 
+#include "core/camera.h"
+#include "pipeline/capture/capture_io.h"
 #include "pipeline/training/detail_extraction.h"
 
 namespace crease {
@@ -83,6 +85,20 @@ struct SurfaceError {
   double normal_deg = 0;    // mean angle between the normals
 };
 
+// The refinement's steps (Sec. 5.1) at its flow points, 2D error against the true
+// projections, px, over the flow points visible in the truth and to the refiner:
+// u^t (the projection of L^t), ũ^t after the flow and outlier steps (all, and per
+// status: trusted LK, MLS-recovered, reset to u^t), the 3D fit F, and L~^t. `coarse_*`
+// beside a status is u^t's error at the same points, so that a step's gain or loss
+// reads off one row. Means over points (per frame) or over frames (summary).
+struct FlowStageErrors {
+  int points = 0, trusted = 0, recovered = 0, reset = 0;
+  double coarse_px = 0, flow_px = 0, fit_px = 0, refined_px = 0;
+  double trusted_px = 0, trusted_coarse_px = 0;
+  double recovered_px = 0, recovered_coarse_px = 0;
+  double reset_px = 0;
+};
+
 struct FrameCaptureEval {
   int frame = 0;
   bool tracked = false;
@@ -94,6 +110,8 @@ struct FrameCaptureEval {
   // Prior error: the tracking rig's best fit to the true coarse mesh (RigPriorFit),
   // 2D over the visible face-chart vertices and 3D over all of them.
   double prior_px = 0, prior_mm = 0;
+  bool has_flow = false;  // the capture stored the refinement's flow points
+  FlowStageErrors flow;
   bool has_displacement = false;
   MapComparison d_face, d_wrinkle, d_face_band, d_wrinkle_band;
   double d_jitter_mm = 0;  // band, wrinkle regions
@@ -112,6 +130,8 @@ struct CaptureEvalSummary {
   double coarse_px = 0, refined_px = 0, coarse_mm = 0, refined_mm = 0, coarse_aligned_mm = 0, refined_aligned_mm = 0;
   double coarse_jitter_px = 0, refined_jitter_px = 0;
   double prior_px = 0, prior_mm = 0;  // the tracking rig's best fit to the truth (mean over tracked frames)
+  int flow_frames = 0;
+  FlowStageErrors flow;  // means over the frames with flow points (flow_frames)
   // Displacement, pooled over the texels of the active frames (those whose true
   // wrinkle-band RMS in the wrinkle regions reaches active_reference_rms_mm: a
   // correlation or amplitude ratio of a frame without wrinkles means nothing).
@@ -150,6 +170,12 @@ struct CaptureEvalSummary {
 // positively. The wrinkle offset of Fig. 14.
 bool BestVerticalOffset(const cv::Mat& D, const cv::Mat& G, const cv::Mat& mask, int max_shift, int* shift,
                         double* correlation);
+
+// FlowStageErrors of one frame: `arrays` with flow points and L~^t, `truth_px` the
+// true projections of the rig's vertices (#V×2), `truth_visible` per vertex,
+// `on_face` the vertices evaluated (the face chart's, with a truth correspondence).
+FlowStageErrors MeasureFlowStages(const CaptureFrameArrays& arrays, const Camera& camera, const MatX2d& truth_px,
+                                  const std::vector<char>& truth_visible, const std::vector<char>& on_face);
 
 // Evaluates the capture folder `capture` (written by `crease capture`) against the
 // sequence dataset `dataset` (written by `crease synth sequence` with its maps).

@@ -1,4 +1,5 @@
-// The wrinkle offset of eval/capture_metrics.h (the slide of the paper's Fig. 14).
+// The wrinkle offset of eval/capture_metrics.h (the slide of the paper's Fig. 14),
+// and the refinement-step errors at the flow points with their file round trip.
 #include "eval/capture_metrics.h"
 
 #include <gtest/gtest.h>
@@ -6,6 +7,9 @@
 #include <cmath>
 
 #include <opencv2/core.hpp>
+
+#include "pipeline/capture/capture_io.h"
+#include "pipeline/capture/flow_refinement.h"
 
 namespace crease {
 namespace {
@@ -43,6 +47,72 @@ TEST(CaptureMetrics, WrinkleOffsetFindsAKnownShift) {
   EXPECT_LT(r, 0.95);
   // Nothing to correlate: a flat map.
   EXPECT_FALSE(BestVerticalOffset(cv::Mat::zeros(n, n, CV_32F), G, mask, 5, &found, &r));
+}
+
+// Four flow points with known errors per step: the statuses split the means, the
+// invisible point and the point off the evaluated set do not count, and the
+// arrays survive the capture's frame file.
+TEST(CaptureMetrics, FlowStagesSplitTheErrorByStep) {
+  const CameraIntrinsics K = CameraIntrinsics::FromFov(50.0, 640, 480);
+  const Camera cam(K, Rigid3d());
+  const int V = 6;
+  MatX2d truth(V, 2);
+  CaptureFrameArrays a;
+  a.frame = 7;
+  a.tracked = true;
+  a.coarse.resize(V, 3);
+  a.refined.resize(V, 3);
+  for (int v = 0; v < V; ++v) {
+    const Eigen::Vector3d X(10.0 * v - 25.0, 5.0 * v, 500.0);
+    a.coarse.row(v) = X.transpose();
+    a.refined.row(v) = X.transpose();
+    truth.row(v) = cam.ProjectCamPoint(X).transpose();
+  }
+  // L~^t is 1 px off in x at every vertex (moved by 1 px · z / f in camera x).
+  for (int v = 0; v < V; ++v) a.refined(v, 0) += a.refined(v, 2) / K.fx;
+  a.flow_vertex = {0, 1, 2, 3, 4};
+  a.flow_status = {static_cast<uint8_t>(FlowPointStatus::kTrusted), static_cast<uint8_t>(FlowPointStatus::kTrusted),
+                   static_cast<uint8_t>(FlowPointStatus::kRecovered), static_cast<uint8_t>(FlowPointStatus::kInvisible),
+                   static_cast<uint8_t>(FlowPointStatus::kReset)};
+  a.flow_projected = truth.topRows(5);
+  a.flow_projected.col(1).array() += 2.0;  // u^t: 2 px off everywhere
+  a.flow_positions = truth.topRows(5);
+  a.flow_positions.col(0).array() += Eigen::Array<double, 5, 1>(1.0, 3.0, 4.0, 9.0, 0.0);
+  a.flow_positions(4, 1) += 2.0;  // the reset point sits at u^t
+  a.flow_fitted = truth.topRows(5);
+  a.flow_fitted.col(1).array() += 0.5;
+  const std::vector<char> visible(V, 1);
+  std::vector<char> evaluated(V, 1);
+  evaluated[1] = 0;  // a trusted point off the evaluated vertices
+  const FlowStageErrors e = MeasureFlowStages(a, cam, truth, visible, evaluated);
+  EXPECT_EQ(e.points, 3);
+  EXPECT_EQ(e.trusted, 1);
+  EXPECT_EQ(e.recovered, 1);
+  EXPECT_EQ(e.reset, 1);
+  EXPECT_NEAR(e.coarse_px, 2.0, 1e-9);
+  EXPECT_NEAR(e.trusted_px, 1.0, 1e-9);
+  EXPECT_NEAR(e.trusted_coarse_px, 2.0, 1e-9);
+  EXPECT_NEAR(e.recovered_px, 4.0, 1e-9);
+  EXPECT_NEAR(e.reset_px, 2.0, 1e-9);
+  EXPECT_NEAR(e.flow_px, (1.0 + 4.0 + 2.0) / 3.0, 1e-9);
+  EXPECT_NEAR(e.fit_px, 0.5, 1e-9);
+  EXPECT_NEAR(e.refined_px, 1.0, 1e-6);
+
+  const std::filesystem::path path = std::filesystem::temp_directory_path() / "crease_flow_stages.cfr";
+  WriteCaptureFrameArrays(path, a);
+  const CaptureFrameArrays b = ReadCaptureFrameArrays(path);
+  std::filesystem::remove(path);
+  EXPECT_EQ(b.flow_vertex, a.flow_vertex);
+  EXPECT_EQ(b.flow_status, a.flow_status);
+  EXPECT_LT((b.flow_positions - a.flow_positions).cwiseAbs().maxCoeff(), 1e-3);
+  EXPECT_LT((b.flow_fitted - a.flow_fitted).cwiseAbs().maxCoeff(), 1e-3);
+  const FlowStageErrors e2 = MeasureFlowStages(b, cam, truth, visible, evaluated);
+  EXPECT_NEAR(e2.recovered_px, 4.0, 1e-3);
+  // A frame without flow points (an older file, an unrefined frame) has none after the round trip.
+  a.flow_vertex.clear();
+  WriteCaptureFrameArrays(path, a);
+  EXPECT_TRUE(ReadCaptureFrameArrays(path).flow_vertex.empty());
+  std::filesystem::remove(path);
 }
 
 }  // namespace

@@ -256,7 +256,7 @@ TEST(FlowRefinement, StaysCloseToTheTruthOverAJitterySequence) {
   // Drift: OpenCV's LK under-estimates the studio renders' motion by ~15–20 %
   // (measured from the true positions: −0.3…−0.5 px per frame in x for ~2 px of
   // motion, under front, studio and raking light), so L~ drifts by ~0.4 px per
-  // frame with a perfect tracker; ξ_β and the pull to the 3D fit bound it.
+  // frame with a perfect tracker; ξ_β and the pull to the tracker (κ) bound it.
   EXPECT_LT(refined_sum, 0.75 * coarse_sum);
   EXPECT_LT(last_refined, FlowRefinementOptions{}.outlier_distance_px);
 }

@@ -162,13 +162,7 @@ void AddCaptureCommands(CLI::App& app) {
                           {"detail", ct.detail_ms},       {"hifi", ct.hifi_ms},        {"wrinkle_map", ct.wrinkle_map_ms},
                           {"total", ct.total_ms()}};
         WriteJsonFile(dir / "frames" / fmt::format("{:06d}.json", f.frame), j);
-        CaptureFrameArrays arrays;
-        arrays.frame = f.frame;
-        arrays.tracked = f.has_mesh;
-        arrays.coarse = f.coarse;
-        arrays.refined = f.refined;
-        arrays.landmarks = t.landmarks;
-        WriteCaptureFrameArrays(dir / "frames" / fmt::format("{:06d}.cfr", f.frame), arrays);
+        WriteCaptureFrameArrays(dir / "frames" / fmt::format("{:06d}.cfr", f.frame), MakeCaptureFrameArrays(f));
         csv += fmt::format("{},{},{},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{:.3f},{},{},{}\n", f.frame,
                            f.has_mesh ? 1 : 0, t.detected ? 1 : 0, ct.landmarks_ms, ct.fit_ms, ct.visibility_ms,
                            ct.refine_ms, ct.texture_ms, ct.mesoscopic_ms, ct.detail_ms, ct.hifi_ms, ct.total_ms(),

@@ -30,6 +30,24 @@ Eigen::Matrix<double, Eigen::Dynamic, C, Eigen::RowMajor> FromFloat(const std::v
 
 }  // namespace
 
+CaptureFrameArrays MakeCaptureFrameArrays(const CapturedFrame& frame) {
+  CaptureFrameArrays a;
+  a.frame = frame.frame;
+  a.tracked = frame.has_mesh;
+  a.coarse = frame.coarse;
+  a.refined = frame.refined;
+  a.landmarks = frame.tracked.landmarks;
+  const RefinedFrame& r = frame.refinement;
+  if (frame.has_mesh && r.refined) {
+    a.flow_vertex = r.flow_vertex;
+    for (FlowPointStatus st : r.status) a.flow_status.push_back(static_cast<uint8_t>(st));
+    a.flow_projected = r.projected_positions;
+    a.flow_positions = r.flow_positions;
+    a.flow_fitted = r.fit_positions;
+  }
+  return a;
+}
+
 void WriteCaptureFrameArrays(const std::filesystem::path& path, const CaptureFrameArrays& frame) {
   Require(frame.coarse.rows() == frame.refined.rows(),
           fmt::format("{}: L^t has {} vertices but L~^t {}", path.string(), frame.coarse.rows(), frame.refined.rows()));
@@ -43,6 +61,21 @@ void WriteCaptureFrameArrays(const std::filesystem::path& path, const CaptureFra
   writer.Add("coarse", coarse.data(), {frame.coarse.rows(), 3});
   writer.Add("refined", refined.data(), {frame.refined.rows(), 3});
   writer.Add("landmarks", landmarks.data(), {frame.landmarks.rows(), 2});
+  const int64_t nf = static_cast<int64_t>(frame.flow_vertex.size());
+  std::vector<float> projected, positions, fitted;
+  if (nf > 0) {
+    Require(static_cast<int64_t>(frame.flow_status.size()) == nf && frame.flow_projected.rows() == nf &&
+                frame.flow_positions.rows() == nf && frame.flow_fitted.rows() == nf,
+            fmt::format("{}: the flow point arrays disagree in size", path.string()));
+    projected = ToFloat<2>(frame.flow_projected);
+    positions = ToFloat<2>(frame.flow_positions);
+    fitted = ToFloat<2>(frame.flow_fitted);
+    writer.Add("flow_vertex", frame.flow_vertex.data(), {nf});
+    writer.Add("flow_status", frame.flow_status.data(), {nf});
+    writer.Add("flow_projected", projected.data(), {nf, 2});
+    writer.Add("flow_positions", positions.data(), {nf, 2});
+    writer.Add("flow_fitted", fitted.data(), {nf, 2});
+  }
   writer.Write(path, kMagic, CaptureFrameArrays::kFormatVersion);
 }
 
@@ -66,6 +99,18 @@ CaptureFrameArrays ReadCaptureFrameArrays(const std::filesystem::path& path) {
   const std::vector<float> lm = file.Get<float>("landmarks", -1, what);
   Require(lm.size() % 2 == 0, fmt::format("{}: landmarks array has an odd size", what));
   out.landmarks = FromFloat<2>(lm);
+  if (file.arrays.count("flow_vertex")) {
+    const std::vector<int32_t> ids = file.Get<int32_t>("flow_vertex", -1, what);
+    const int64_t nf = static_cast<int64_t>(ids.size());
+    for (int32_t v : ids) {
+      Require(v >= 0 && v < n, fmt::format("{}: flow point vertex {} outside the {} vertices", what, v, n));
+    }
+    out.flow_vertex.assign(ids.begin(), ids.end());
+    out.flow_status = file.Get<uint8_t>("flow_status", nf, what);
+    out.flow_projected = FromFloat<2>(file.Get<float>("flow_projected", 2 * nf, what));
+    out.flow_positions = FromFloat<2>(file.Get<float>("flow_positions", 2 * nf, what));
+    out.flow_fitted = FromFloat<2>(file.Get<float>("flow_fitted", 2 * nf, what));
+  }
   return out;
 }
 

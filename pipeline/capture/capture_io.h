@@ -2,14 +2,20 @@
 // frames/NNNNNN.cfr, a core/array_file.h container (magic "CREASCFR", version 1)
 // with the coarse mesh L^t and the refined mesh L~^t of the frame (float32 #V×3,
 // camera frame, mm) and the tracker's 68 landmarks (float32 68×2 px), plus a JSON
-// header {"frame", "tracked", "num_vertices"}. docs/formats.md describes the whole
-// capture folder.
+// header {"frame", "tracked", "num_vertices"}. A refined frame also carries its flow
+// points (Sec. 5.1; optional arrays, absent in older files and unrefined frames):
+// flow_vertex (i32, rig vertex ids), flow_status (u8, FlowPointStatus) and, float32
+// n×2 px, flow_projected u^t (L^t), flow_positions ũ^t (after the outlier tests and
+// MLS) and flow_fitted (the 3D fit F), so that `crease eval` can tell which step of
+// the refinement moves the points away from the truth. docs/formats.md describes the
+// whole capture folder.
 #pragma once
 
 #include <cstdint>
 #include <filesystem>
 
 #include "core/types.h"
+#include "pipeline/capture/capture.h"
 
 namespace crease {
 
@@ -20,7 +26,14 @@ struct CaptureFrameArrays {
   MatX3d coarse;     // L^t (empty when not tracked)
   MatX3d refined;    // L~^t (empty when not tracked)
   MatX2d landmarks;  // 68×2 px (may be empty)
+  // Flow points of the refinement (all empty when the frame was not refined).
+  std::vector<int> flow_vertex;
+  std::vector<uint8_t> flow_status;  // FlowPointStatus
+  MatX2d flow_projected, flow_positions, flow_fitted;
 };
+
+// The arrays of a captured frame (L^t, L~^t, the tracker's landmarks, the flow points).
+CaptureFrameArrays MakeCaptureFrameArrays(const CapturedFrame& frame);
 
 void WriteCaptureFrameArrays(const std::filesystem::path& path, const CaptureFrameArrays& frame);
 // Throws Error naming the file when it is missing, of another kind or version, or

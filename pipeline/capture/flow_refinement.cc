@@ -30,6 +30,7 @@ void FlowRefinementOptions::VisitFields(OptionVisitor& v) {
   v.Field("lk_epsilon_px", lk_epsilon_px);
   v.Field("lk_min_eigenvalue", lk_min_eigenvalue);
   v.Field("lk_predict_from_tracker", lk_predict_from_tracker);
+  v.Field("flow_tracker_pull", flow_tracker_pull);
   v.Field("outlier_intensity", outlier_intensity);
   v.Field("outlier_distance_px", outlier_distance_px);
   v.Field("flow_point_spacing_mm", flow_point_spacing_mm);
@@ -60,6 +61,8 @@ void FlowRefinementOptions::Check() const {
   CheckGe(o, "lk_max_iterations", lk_max_iterations, 1);
   CheckGt(o, "lk_epsilon_px", lk_epsilon_px, 0.0);
   CheckGe(o, "lk_min_eigenvalue", lk_min_eigenvalue, 0.0);
+  CheckGe(o, "flow_tracker_pull", flow_tracker_pull, 0.0);
+  CheckLe(o, "flow_tracker_pull", flow_tracker_pull, 1.0);
   CheckGt(o, "outlier_intensity", outlier_intensity, 0.0);
   CheckGt(o, "outlier_distance_px", outlier_distance_px, 0.0);
   CheckGt(o, "flow_point_spacing_mm", flow_point_spacing_mm, 0.5);
@@ -273,6 +276,8 @@ struct FlowRefiner::Impl {
   // out += Σ_b coeff_b B_b over the non-zero coefficients (all vertices, head frame).
   void AddExpressions(const Eigen::VectorXd& coeff, Eigen::VectorXd* out) const;
   MatX3d ToCamera(const Eigen::VectorXd& head, const Rigid3d& pose) const;
+  // Projections of the flow points of `camera_vertices` (#V×3), px; NaN behind the camera.
+  MatX2d Project(const MatX3d& camera_vertices) const;
   LandmarkFrameFit SolveFit(const std::vector<int>& points, const std::vector<Eigen::Vector2d>& targets,
                             const std::vector<double>& weights, const Eigen::VectorXd& beta_tracker,
                             const Rigid3d& pose0) const;
@@ -533,6 +538,19 @@ MatX3d FlowRefiner::Impl::ToCamera(const Eigen::VectorXd& head, const Rigid3d& p
   const Eigen::Vector3d& t = pose.translation;
   MatX3d out(V, 3);
   for (int v = 0; v < V; ++v) out.row(v) = (R * head.segment<3>(3 * v) + t).transpose();
+  return out;
+}
+
+MatX2d FlowRefiner::Impl::Project(const MatX3d& camera_vertices) const {
+  MatX2d out(static_cast<int>(flow_vertex.size()), 2);
+  for (int i = 0; i < out.rows(); ++i) {
+    const Eigen::Vector3d X = camera_vertices.row(flow_vertex[i]).transpose();
+    if (X.z() > 1e-6) {
+      out.row(i) << K.fx * X.x() / X.z() + K.cx, K.fy * X.y() / X.z() + K.cy;
+    } else {
+      out.row(i).setConstant(std::numeric_limits<double>::quiet_NaN());
+    }
+  }
   return out;
 }
 
@@ -838,6 +856,7 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
           continue;  // outlier
         }
         status[i] = FlowPointStatus::kTrusted;
+        flow.row(i) += o.flow_tracker_pull * (u.row(i) - flow.row(i));
       }
     }
   }
@@ -852,6 +871,27 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
   out.invisible = counts.invisible;
   out.distance_outliers = counts.distance_outliers;
   out.mls_ms = MsSince(t0);
+  out.flow_positions = flow;
+  out.status = status;
+  // State for the next frame: ũ^t of L~^t at the flow points.
+  auto remember = [&] {
+    s.prev_refined = s.Project(out.vertices);
+    s.prev_projected = u;
+    s.prev_visible = vis;
+    s.prev_pyramid = std::move(pyramid);
+    s.has_prev = true;
+    out.total_ms = MsSince(t_start);
+  };
+  if (counts.trusted + counts.recovered == 0) {
+    // No point measured by flow (the first frame, or after a loss): L~^t = L^t. A fit
+    // to the landmarks alone would re-solve the tracker's problem under other weights
+    // and priors, and every later frame's flow would start from its error.
+    out.fit = tf;
+    out.vertices = out.coarse_vertices;
+    out.fit_positions = u;
+    remember();
+    return out;
+  }
 
   // --- 3D fit with the refined 2D positions and the tracker's landmarks.
   t0 = Clock::now();
@@ -924,6 +964,7 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
         const auto te = Clock::now();
         s.AddExpressions(out.fit.expression - tf.expression, &head);
         out.vertices = s.ToCamera(head, out.fit.cam_from_head);
+        out.fit_positions = s.Project(out.vertices);
         evaluate2_ms = MsSince(te);
       });
   out.evaluate_ms += evaluate2_ms;
@@ -939,25 +980,7 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
   }
   // (the fitted mesh's evaluation overlaps the solves; it is counted in evaluate_ms)
   out.laplacian_ms = std::max(0.0, MsSince(t0) - evaluate2_ms);
-  out.flow_positions = flow;
-  out.status = status;
-
-  // --- State for the next frame: ũ^t of L~^t at the flow points.
-  s.prev_refined.resize(nf, 2);
-  for (int i = 0; i < nf; ++i) {
-    const Eigen::Vector3d X = out.vertices.row(s.flow_vertex[i]).transpose();
-    if (X.z() > 1e-6) {
-      s.prev_refined(i, 0) = s.K.fx * X.x() / X.z() + s.K.cx;
-      s.prev_refined(i, 1) = s.K.fy * X.y() / X.z() + s.K.cy;
-    } else {
-      s.prev_refined.row(i).setConstant(std::numeric_limits<double>::quiet_NaN());
-    }
-  }
-  s.prev_projected = u;
-  s.prev_visible = vis;
-  s.prev_pyramid = std::move(pyramid);
-  s.has_prev = true;
-  out.total_ms = MsSince(t_start);
+  remember();
   return out;
 }
 

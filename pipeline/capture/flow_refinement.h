@@ -90,6 +90,40 @@
 //   9. Not in the paper, for speed on a CPU: LK on ~260 points, the pyramid built in
 //      parallel with L^t, JᵀJ of the 3D fit reused between refreshes, only the
 //      blendshapes in use evaluated on all vertices.
+//  10. Pull to the tracker (flow_tracker_pull κ = 0.2): each trusted LK position
+//      moves κ of the way to u^t. The paper chains pure flow, bounded only by ξ_β.
+//      Flow measures the motion between frames, not where a point is: a chained
+//      point keeps the error it started with plus LK's bias (OpenCV's LK
+//      under-estimates the studio's skin motion by ~15–20 %: on low-texture skin
+//      part of the gradient is shading, which does not move with the surface),
+//      while the tracker's error changes over a sequence (its identity settles
+//      over the first frames), so the chain holds on to errors the tracker has
+//      since corrected. With κ the chain's offset from u^t decays with a time
+//      constant of 1/κ frames (a complementary filter: flow for the frame-to-frame
+//      motion, the tracker for the position). Measured on the quickstart's
+//      sequence (ICT actor 101, workout-talking, 640×480, first 120 frames; the
+//      eval's "refinement steps" table compares the trusted LK points with u^t at
+//      the same points): with the ground-truth-prior tracker and κ = 0 the trusted
+//      points' error jumps 1.1 px above u^t's at frame 4, when the tracker's error
+//      drops, and decays only through ξ_β resets (whole mesh 2.07 → 2.20 px);
+//      κ = 0.05 / 0.1 / 0.2 / 0.4 give 2.11 / 2.08 / 2.06 / 2.05 px (jitter 0.135 →
+//      0.138 / 0.137 / 0.135 / 0.127 px). With the landmark regressor: 5.93 → 5.65 px
+//      at κ = 0, 5.58 / 5.59 / 5.58 / 5.59 px with κ, jitter 3.36 → 1.21 / 1.25 /
+//      1.34 / 1.64 px. In tests/flow_refinement_test.cc (4 frames, a jittery but
+//      unbiased tracker) the refined error is 1.65 px at κ = 0, 1.20 px at κ = 0.2
+//      (coarse 1.70 px): the pull removes LK's drift.
+//  11. A frame without any trusted or recovered flow point (the first frame, after
+//      a loss) is not refitted: L~^t = L^t. The paper does not say; a fit to the
+//      51 landmarks alone under the refinement's weights moved the flow points of
+//      the quickstart's first frame from 4.39 px (u^0) to 5.59 px, and the later
+//      frames' flow started from there.
+//  12. The Laplacian step hardly moves the flow points at the default weights
+//      (w_d = λ = 1: a vertex's cotangent weights sum to ~5, so a lone constraint
+//      moves it ~1/6 of the way to ũ^t; L~^t's error at the flow points equals
+//      F's within 0.05 px in the runs above). Raising w_d to 10 or 100 made L~^t
+//      follow ũ^t and increased the error with both trackers (e.g. ground-truth
+//      prior 2.52 and 2.72 px instead of 2.20 at κ = 0), because ũ^t is not yet
+//      better than F; it stays at 1 until flow is.
 #pragma once
 
 #include <cstdint>
@@ -126,6 +160,10 @@ struct FlowRefinementOptions {
   // Start LK at ũ^{t−1} + (u^t − u^{t−1}) (the tracker's predicted motion) instead
   // of ũ^{t−1}. Not in the paper; helps with fast motion.
   bool lk_predict_from_tracker = false;
+  // κ: each frame, a trusted flow position moves this fraction of the way to the
+  // tracker's u^t: ũ^t ← ũ^t + κ (u^t − ũ^t) (not in the paper; see Differences 10).
+  // 0 = the paper's pure flow chain.
+  double flow_tracker_pull = 0.2;
   // ξ_α: intensity outlier threshold on gray in [0, 1] (8-bit / 255), Sec. 5.1.
   double outlier_intensity = 0.02;
   // ξ_β: distance outlier threshold between ũ^t and u^t, px, Sec. 5.1.
@@ -232,6 +270,7 @@ struct RefinedFrame {
   std::vector<int> flow_vertex;         // rig vertex of each flow point
   MatX2d flow_positions;                // ũ^t per flow point, px
   MatX2d projected_positions;           // u^t per flow point, px (projection of L^t)
+  MatX2d fit_positions;                 // per flow point, px: projection of the 3D fit F (before the Laplacian)
   std::vector<FlowPointStatus> status;  // per flow point
   int trusted = 0, recovered = 0, reset = 0, invisible = 0;
   // Outliers by cause (a point counts once, for the first test it failed): LK failed
