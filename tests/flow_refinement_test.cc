@@ -195,10 +195,12 @@ TEST(FlowRefinement, StaysCloseToTheTruthOverAJitterySequence) {
   const char* channels[] = {"mouthSmile_L", "browInnerUp_R", "cheekSquint_L", "jawOpen"};
   FlowRefiner refiner(rig, K, FlowRefinementOptions{});
   Rng rng(9);
-  const int frames = 4;
+  const int frames = 8;
   double coarse_sum = 0, refined_sum = 0, coarse_jitter = 0, refined_jitter = 0, last_refined = 0;
   MatX2d prev_coarse_err, prev_refined_err;
   std::vector<uint8_t> prev_visible;
+  std::vector<StudioFrame> rendered;
+  double jittery_pull = 0, jittery_noise = 0;
   for (int k = 0; k < frames; ++k) {
     Eigen::VectorXd e = Eigen::VectorXd::Zero(rig.num_expressions());
     e[rig.ExpressionIndex("mouthSmile_L")] = 0.1 + 0.05 * k;
@@ -207,7 +209,8 @@ TEST(FlowRefinement, StaysCloseToTheTruthOverAJitterySequence) {
     SequenceFrame pose;
     pose.yaw_deg = 1.0 * k;
     pose.pitch_deg = -0.5 * k;
-    const StudioFrame f = studio.RenderStill(e, pose, nullptr, nullptr, 10 + k);
+    rendered.push_back(studio.RenderStill(e, pose, nullptr, nullptr, 10 + k));
+    const StudioFrame& f = rendered.back();
     Eigen::VectorXd beta = f.truth.expression;
     for (const char* c : channels) {
       const int b = rig.ExpressionIndex(c);
@@ -246,6 +249,8 @@ TEST(FlowRefinement, StaysCloseToTheTruthOverAJitterySequence) {
     prev_refined_err = refined_err;
     prev_visible = f.truth.vertex_visible;
     last_refined = d;
+    jittery_pull = r.pull;
+    jittery_noise = r.tracker_noise_px;
   }
   const int n = frames - 1;
   std::printf("mean over frames 1–%d: error %.2f → %.2f px, jitter %.2f → %.2f px\n", n, coarse_sum / n,
@@ -259,6 +264,20 @@ TEST(FlowRefinement, StaysCloseToTheTruthOverAJitterySequence) {
   // frame with a perfect tracker; ξ_β and the pull to the tracker (κ) bound it.
   EXPECT_LT(refined_sum, 0.75 * coarse_sum);
   EXPECT_LT(last_refined, FlowRefinementOptions{}.outlier_distance_px);
+
+  // The adaptive pull (Differences 10): the same frames with a steady tracker (the
+  // true fit) give a smaller tracker noise and a stronger pull than the jittery one.
+  FlowRefiner steady(rig, K, FlowRefinementOptions{});
+  RefinedFrame last;
+  for (const StudioFrame& f : rendered) {
+    last = steady.Refine(Gray8(f.image.srgb8), TrackedWithNoisyLandmarks(f.truth, f.truth.expression, f.truth.cam_from_head, rng),
+                         TheStudio().actor.identity, f.truth.vertex_visible);
+  }
+  std::printf("adaptive pull: jittery tracker κ %.3f (σ_r %.2f px), steady tracker κ %.3f (σ_r %.2f px)\n",
+              jittery_pull, jittery_noise, last.pull, last.tracker_noise_px);
+  EXPECT_GT(jittery_noise, 1.5 * last.tracker_noise_px);
+  EXPECT_GT(last.pull, 1.5 * jittery_pull);
+  EXPECT_GT(jittery_pull, 0.0);
 }
 
 // A smooth 2D deformation of a grid (as flow points would move) for MLS tests.

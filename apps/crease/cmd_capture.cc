@@ -155,6 +155,9 @@ void AddCaptureCommands(CLI::App& app) {
                              {"recovered", f.refinement.recovered},
                              {"reset", f.refinement.reset},
                              {"invisible", f.refinement.invisible},
+                             {"pull", f.refinement.pull},
+                             {"tracker_noise_px", f.refinement.tracker_noise_px},
+                             {"step_sigma_px", f.refinement.step_sigma_px},
                              {"cam_from_head", PoseJson(f.refinement.fit.cam_from_head)}};
         }
         j["timing_ms"] = {{"landmarks", ct.landmarks_ms}, {"fit", ct.fit_ms},          {"visibility", ct.visibility_ms},

@@ -18,6 +18,7 @@
 #include <opencv2/video/tracking.hpp>
 
 #include "core/error.h"
+#include "core/stats.h"
 #include "core/mesh_ops.h"
 #include "core/options.h"
 
@@ -30,7 +31,12 @@ void FlowRefinementOptions::VisitFields(OptionVisitor& v) {
   v.Field("lk_epsilon_px", lk_epsilon_px);
   v.Field("lk_min_eigenvalue", lk_min_eigenvalue);
   v.Field("lk_predict_from_tracker", lk_predict_from_tracker);
+  v.Field("flow_pull_adaptive", flow_pull_adaptive);
   v.Field("flow_tracker_pull", flow_tracker_pull);
+  v.Field("flow_step_sigma_px", flow_step_sigma_px);
+  v.Field("flow_step_sigma_ratio", flow_step_sigma_ratio);
+  v.Field("flow_noise_rate", flow_noise_rate);
+  v.Field("flow_gate_chi2", flow_gate_chi2);
   v.Field("outlier_intensity", outlier_intensity);
   v.Field("outlier_distance_px", outlier_distance_px);
   v.Field("flow_point_spacing_mm", flow_point_spacing_mm);
@@ -63,6 +69,11 @@ void FlowRefinementOptions::Check() const {
   CheckGe(o, "lk_min_eigenvalue", lk_min_eigenvalue, 0.0);
   CheckGe(o, "flow_tracker_pull", flow_tracker_pull, 0.0);
   CheckLe(o, "flow_tracker_pull", flow_tracker_pull, 1.0);
+  CheckGt(o, "flow_step_sigma_px", flow_step_sigma_px, 0.0);
+  CheckGe(o, "flow_step_sigma_ratio", flow_step_sigma_ratio, 0.0);
+  CheckGt(o, "flow_noise_rate", flow_noise_rate, 0.0);
+  CheckLe(o, "flow_noise_rate", flow_noise_rate, 1.0);
+  CheckGe(o, "flow_gate_chi2", flow_gate_chi2, 0.0);
   CheckGt(o, "outlier_intensity", outlier_intensity, 0.0);
   CheckGt(o, "outlier_distance_px", outlier_distance_px, 0.0);
   CheckGt(o, "flow_point_spacing_mm", flow_point_spacing_mm, 0.5);
@@ -264,9 +275,13 @@ struct FlowRefiner::Impl {
 
   // State across frames.
   bool has_prev = false;
+  // The adaptive pull (PullToTracker): the flow chain's error variance P and the two
+  // averaged estimates of the tracker's noise variance, px² per coordinate (−1: none yet).
+  double chain_variance = -1.0, noise_innovation = -1.0, noise_second_difference = -1.0;
   std::vector<cv::Mat> prev_pyramid;
   MatX2d prev_refined;    // ũ^{t−1}: projection of L~^{t−1} at the flow points
   MatX2d prev_projected;  // u^{t−1}
+  MatX2d prev2_projected;  // u^{t−2} (NaN where unknown)
   std::vector<uint8_t> prev_visible;
 
   Impl(const FaceRig& r, const CameraIntrinsics& k, const FlowRefinementOptions& o) : rig(r), K(k), options(o) {}
@@ -278,6 +293,9 @@ struct FlowRefiner::Impl {
   MatX3d ToCamera(const Eigen::VectorXd& head, const Rigid3d& pose) const;
   // Projections of the flow points of `camera_vertices` (#V×3), px; NaN behind the camera.
   MatX2d Project(const MatX3d& camera_vertices) const;
+  // Moves the trusted flow points κ of the way to u^t (Differences 10); updates the
+  // innovation statistics; records κ and σ_r in `out`.
+  void PullToTracker(const MatX2d& u, MatX2d* flow, std::vector<FlowPointStatus>* status, RefinedFrame* out);
   LandmarkFrameFit SolveFit(const std::vector<int>& points, const std::vector<Eigen::Vector2d>& targets,
                             const std::vector<double>& weights, const Eigen::VectorXd& beta_tracker,
                             const Rigid3d& pose0) const;
@@ -541,6 +559,63 @@ MatX3d FlowRefiner::Impl::ToCamera(const Eigen::VectorXd& head, const Rigid3d& p
   return out;
 }
 
+void FlowRefiner::Impl::PullToTracker(const MatX2d& u, MatX2d* flow, std::vector<FlowPointStatus>* status,
+                                      RefinedFrame* out) {
+  const FlowRefinementOptions& o = options;
+  std::vector<int> trusted;
+  for (size_t i = 0; i < status->size(); ++i)
+    if ((*status)[i] == FlowPointStatus::kTrusted) trusted.push_back(static_cast<int>(i));
+  if (trusted.empty()) return;
+  double kappa = o.flow_tracker_pull;
+  if (o.flow_pull_adaptive) {
+    // Robust (median) statistics over the trusted points: LK's failures (a blurred
+    // forehead under fast motion) are not Gaussian. For a 2D Gaussian with variance
+    // σ² per coordinate, the median of |x|² is 2 ln 2 · σ².
+    const double to_variance = 1.0 / (2.0 * std::log(2.0));
+    std::vector<double> innovation, motion, second;
+    for (int i : trusted) {
+      innovation.push_back((u.row(i) - flow->row(i)).squaredNorm());
+      motion.push_back((flow->row(i) - prev_refined.row(i)).squaredNorm());
+      const Eigen::RowVector2d d2 = u.row(i) - 2.0 * prev_projected.row(i) + prev2_projected.row(i);
+      if (d2.allFinite()) second.push_back(d2.squaredNorm());
+    }
+    // LK's step noise grows with the motion (its bias is a fraction of it).
+    const double sigma_q = o.flow_step_sigma_px + o.flow_step_sigma_ratio * std::sqrt(Median(motion) * to_variance);
+    const double q = sigma_q * sigma_q;
+    const double prior = std::max(chain_variance, 0.0) + q;  // P⁻ of the flow chain
+    // The tracker's noise r, bounded twice from above: the innovations (E[ν²] = P⁻ + r;
+    // too high when LK failed beyond σ_q) and the tracker's second differences over
+    // time (6 r for white noise; too high under fast acceleration). Both averaged
+    // over frames at flow_noise_rate; r is the smaller.
+    auto average = [&](double* state, double value) {
+      *state = *state < 0.0 ? value : (1.0 - o.flow_noise_rate) * *state + o.flow_noise_rate * value;
+      return *state;
+    };
+    double r = average(&noise_innovation, std::max(Median(innovation) * to_variance - prior, 0.0));
+    if (second.size() >= 3) r = std::min(r, average(&noise_second_difference, Median(second) * to_variance / 6.0));
+    else if (noise_second_difference >= 0.0) r = std::min(r, noise_second_difference);
+    r = std::max(r, 1e-4);
+    kappa = prior / (prior + r);  // the Kalman gain of this frame
+    chain_variance = (1.0 - kappa) * prior;
+    out->step_sigma_px = sigma_q;
+    out->tracker_noise_px = std::sqrt(r);
+    // The innovation gate: a point whose innovation is improbable under P⁻ + r is
+    // an outlier (recovered by MLS or reset, like the paper's ξ_β outliers).
+    if (o.flow_gate_chi2 > 0.0) {
+      const double gate = o.flow_gate_chi2 * (prior + r);
+      for (size_t k = 0; k < trusted.size(); ++k) {
+        if (innovation[k] <= gate) continue;
+        (*status)[trusted[k]] = FlowPointStatus::kReset;
+        ++out->gate_outliers;
+      }
+    }
+  }
+  out->pull = kappa;
+  for (int i : trusted) {
+    if ((*status)[i] == FlowPointStatus::kTrusted) flow->row(i) += kappa * (u.row(i) - flow->row(i));
+  }
+}
+
 MatX2d FlowRefiner::Impl::Project(const MatX3d& camera_vertices) const {
   MatX2d out(static_cast<int>(flow_vertex.size()), 2);
   for (int i = 0; i < out.rows(); ++i) {
@@ -707,6 +782,7 @@ int FlowRefiner::num_chart_vertices() const { return static_cast<int>(impl_->cha
 
 void FlowRefiner::Reset() {
   impl_->has_prev = false;
+  impl_->chain_variance = -1.0;  // the next chain starts at u^t
   impl_->prev_pyramid.clear();
 }
 
@@ -856,10 +932,10 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
           continue;  // outlier
         }
         status[i] = FlowPointStatus::kTrusted;
-        flow.row(i) += o.flow_tracker_pull * (u.row(i) - flow.row(i));
       }
     }
   }
+  s.PullToTracker(u, &flow, &status, &out);
   out.flow_ms = pyramid_ms + MsSince(t0);
 
   // --- ξ_β and MLS recovery.
@@ -876,6 +952,9 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
   // State for the next frame: ũ^t of L~^t at the flow points.
   auto remember = [&] {
     s.prev_refined = s.Project(out.vertices);
+    s.prev2_projected = s.has_prev && s.prev_projected.rows() == u.rows()
+                            ? s.prev_projected
+                            : MatX2d::Constant(u.rows(), 2, std::numeric_limits<double>::quiet_NaN());
     s.prev_projected = u;
     s.prev_visible = vis;
     s.prev_pyramid = std::move(pyramid);

@@ -16,6 +16,7 @@
 #include "core/array_file.h"
 #include "core/color.h"
 #include "core/error.h"
+#include "core/stats.h"
 #include "core/rng.h"
 #include "pipeline/training/fern_cascade.h"
 
@@ -295,11 +296,7 @@ int CalibrateDetectorBox(ShapeRegressor* regressor, const std::vector<cv::Mat>& 
     ratio.push_back(side_t / side_d);
   }
   if (dx.empty()) return 0;
-  auto median = [](std::vector<double> v) {
-    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-    return v[v.size() / 2];
-  };
-  regressor->detector_box = Eigen::Vector3d(median(dx), median(dy), median(ratio));
+  regressor->detector_box = Eigen::Vector3d(Median(dx), Median(dy), Median(ratio));
   return static_cast<int>(dx.size());
 }
 
@@ -729,8 +726,7 @@ LandmarkResult RegressorLandmarkSource::Track(const cv::Mat& image) {
   for (Eigen::Index i = 0; i < shape.rows(); ++i) {
     for (int c = 0; c < 2; ++c) {
       for (size_t k = 0; k < results.size(); ++k) values[k] = results[k](i, c);
-      std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-      shape(i, c) = values[values.size() / 2];
+      shape(i, c) = Median(values);
     }
   }
   if (IsLost(shape, size, nullptr)) return r;

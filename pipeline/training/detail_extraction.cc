@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "core/stats.h"
 #include "core/mesh_ops.h"
 #include "core/options.h"
 #include "core/ray_caster.h"
@@ -165,8 +166,7 @@ bool BuildOperatorGrid(DetailExtractor::Impl& m, int S, const std::vector<MatX3d
   std::vector<double> lengths;
   for (const auto& t : tris) lengths.push_back((m.grid.V.row(t[0]) - m.grid.V.row(t[1])).norm());
   Require(!lengths.empty(), fmt::format("{}: the operator grid has no cells", m.what));
-  std::nth_element(lengths.begin(), lengths.begin() + lengths.size() / 2, lengths.end());
-  const double typical = lengths[lengths.size() / 2];
+  const double typical = Median(lengths);
   std::vector<Eigen::Vector3i> kept;
   for (const auto& t : tris) {
     bool ok = true;
