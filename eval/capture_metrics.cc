@@ -63,16 +63,6 @@ void CaptureEvalOptions::Check() const {
 
 namespace {
 
-// Expression weights by name → the rig's vector (names the rig lacks are ignored).
-Eigen::VectorXd ExpressionVector(const FaceRig& rig, const std::vector<std::pair<std::string, double>>& named) {
-  Eigen::VectorXd e = Eigen::VectorXd::Zero(rig.num_expressions());
-  for (const auto& [name, w] : named) {
-    const int k = rig.ExpressionIndex(name);
-    if (k >= 0) e[k] = w;
-  }
-  return e;
-}
-
 MatX3d Transform(const Rigid3d& T, const MatX3d& V) {
   MatX3d out(V.rows(), 3);
   for (int i = 0; i < V.rows(); ++i) out.row(i) = (T * Eigen::Vector3d(V.row(i))).transpose();

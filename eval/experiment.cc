@@ -77,7 +77,7 @@ void ExperimentDataset::Check() const {
   CheckGe("dataset", "test_seed", static_cast<double>(test_seed), 0);
   CheckOneOf("dataset", "preset", preset, SequencePresetNames());
   CheckGe("dataset", "seconds", seconds, 0.0);
-  CheckOneOf("dataset", "landmarks", landmarks, {"regressor", "dlib", "ground-truth-prior"});
+  CheckOneOf("dataset", "landmarks", landmarks, {"regressor", "dlib", "ground-truth-prior", "ground-truth-fit"});
   CheckGe("dataset", "landmark_noise_px", landmark_noise_px, 0.0);
   CheckGe("dataset", "mesh_every", mesh_every, 0);
 }
@@ -582,6 +582,8 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
             a.insert(a.end(), {"--tracker", tracker_file.string()});
           } else if (d.landmarks == "dlib") {
             a.insert(a.end(), {"--landmarks", "dlib"});
+          } else if (d.landmarks == "ground-truth-fit") {
+            a.push_back("--ground-truth-fit");
           } else {
             a.insert(a.end(), {"--ground-truth-prior", "--noise", fmt::format("{}", d.landmark_noise_px)});
           }

@@ -63,7 +63,7 @@ struct ExperimentDataset {
   double seconds = 0.0;              // preset length (0: the preset's own)
   int frames = -1;                   // render at most this many frames (−1: all)
   std::string light;                 // light rig of the sequence when it keys none ("" = studio)
-  std::string landmarks = "regressor";  // regressor | dlib | ground-truth-prior
+  std::string landmarks = "regressor";  // regressor | dlib | ground-truth-prior | ground-truth-fit
   double landmark_noise_px = 0.0;    // ground-truth-prior noise, px
   int64_t tracker_seed = 1;          // seed of the landmark regressor's training (fixed across seeds)
   // Capture meshes written every N frames; 0 = none (eval rebuilds H^t itself, and

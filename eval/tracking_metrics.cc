@@ -1,5 +1,6 @@
 #include "eval/tracking_metrics.h"
 
+#include <algorithm>
 #include <cstring>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -82,6 +83,35 @@ FrameTrackingError CompareToTruth(const FrameTruth& truth, const MatX2d& landmar
     e.vertex_px = e.visible_vertices ? sum / e.visible_vertices : 0.0;
   }
   return e;
+}
+
+Eigen::VectorXd ExpressionVector(const FaceRig& rig, const std::vector<std::pair<std::string, double>>& named) {
+  Eigen::VectorXd e = Eigen::VectorXd::Zero(rig.num_expressions());
+  for (const auto& [name, w] : named) {
+    const int k = rig.ExpressionIndex(name);
+    if (k >= 0) e[k] = w;
+  }
+  return e;
+}
+
+TrackedFrame TruthAsTrackedFrame(const FaceRig& rig, const FrameTruth& truth, int frame) {
+  TrackedFrame t;
+  t.frame = frame;
+  t.tracked = true;
+  t.detected = false;
+  t.confidence = 1.0;
+  t.landmarks = truth.landmarks;
+  t.fit.expression = ExpressionVector(rig, truth.expression);
+  t.fit.cam_from_head = truth.cam_from_head;
+  t.fit.converged = true;
+  return t;
+}
+
+Eigen::VectorXd TruthIdentity(const FaceRig& rig, const FrameTruth& truth) {
+  Eigen::VectorXd a = Eigen::VectorXd::Zero(rig.num_identity());
+  const Eigen::Index n = std::min<Eigen::Index>(a.size(), truth.identity.size());
+  a.head(n) = truth.identity.head(n);
+  return a;
 }
 
 }  // namespace crease

@@ -9,7 +9,9 @@
 #include <vector>
 
 #include "core/camera.h"
+#include "core/face_rig.h"
 #include "core/types.h"
+#include "pipeline/capture/tracker.h"
 
 namespace crease {
 
@@ -40,5 +42,17 @@ struct FrameTrackingError {
 // projected with the fitted pose (#V×2); `projected_landmarks`: its 68 landmarks.
 FrameTrackingError CompareToTruth(const FrameTruth& truth, const MatX2d& landmarks, const MatX2d& projected_landmarks,
                                   const MatX2d& projected_vertices);
+
+// Expression weights by name → the rig's vector (names the rig lacks are ignored).
+Eigen::VectorXd ExpressionVector(const FaceRig& rig, const std::vector<std::pair<std::string, double>>& named);
+
+// The ground-truth-fit control (issue 17's exact-geometry rungs): frame `frame` as a
+// perfect global tracker would report it — the truth's pose, its expression weights
+// (by name) and its landmark projections. `rig` must share the truth rig's head
+// frame and expression shapes (the dataset's rig or a part of it, such as its
+// tracking rig); the actor's personal expression deviations remain (the prior error).
+TrackedFrame TruthAsTrackedFrame(const FaceRig& rig, const FrameTruth& truth, int frame);
+// The truth's identity α for `rig`: its first #I coefficients, zero-padded.
+Eigen::VectorXd TruthIdentity(const FaceRig& rig, const FrameTruth& truth);
 
 }  // namespace crease

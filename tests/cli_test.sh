@@ -98,6 +98,17 @@ ok "eval" "$crease" eval --capture "$tmp/cap" --dataset "$tmp/seq" --set surface
 grep -q "refined L~^t" "$tmp/cap/eval.md" && grep -q '"coarse_px"' "$tmp/cap/eval.json" && [ -s "$tmp/cap/eval_frames.csv" ] \
   || { echo "FAIL: eval wrote no metrics"; fails=$((fails+1)); }
 bad "capture exists" "already exists" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-prior -o "$tmp/cap"
+# The ground-truth-fit control (issue 17's exact geometry): L^t is the truth up to the
+# actor's personal deviations, far closer than the landmark fit of the prior control.
+ok "capture ground-truth fit" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-fit --set wrinkle_frames=2 --no-meshes -o "$tmp/cap_fit"
+ok "eval ground-truth fit" "$crease" eval --capture "$tmp/cap_fit" --dataset "$tmp/seq" --set surface_every=0
+python3 - "$tmp/cap/eval.json" "$tmp/cap_fit/eval.json" <<'PY' || { echo "FAIL: the ground-truth fit is not closer than the prior"; fails=$((fails+1)); }
+import json, sys
+prior, fit = (json.load(open(p))["tracking"]["coarse_px"] for p in sys.argv[1:3])
+print(f"coarse 2D error: ground-truth prior {prior:.2f} px, ground-truth fit {fit:.2f} px")
+sys.exit(0 if fit < 0.5 * prior and fit < 1.5 else 1)
+PY
+bad "prior and fit controls together" "exclude each other" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-prior --ground-truth-fit -o "$tmp/cap3"
 bad "capture missing model" "m3.cdm" "$crease" capture -i "$tmp/seq" --model "$tmp/m3.cdm" -o "$tmp/cap2"
 bad "capture model of another kind" "detail model" "$crease" capture -i "$tmp/seq" --model "$tmp/actor.json" -o "$tmp/cap2"
 bad "capture missing input" "does not exist" "$crease" capture -i "$tmp/nothing.mp4" --model "$tmp/model.cdm" --rig "$tmp/head.crig" -o "$tmp/cap2"

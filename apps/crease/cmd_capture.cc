@@ -67,6 +67,9 @@ void AddCaptureCommands(CLI::App& app) {
   static bool no_meshes = false, no_maps = false, write_textures = false, overwrite = false;
   static std::vector<std::string> sets;
   AddTrackingFlags(cmd, &tf);
+  cmd->add_flag("--ground-truth-fit", tf.gt_fit,
+                "Experimental control: the dataset's true pose, expression weights and identity as the tracker's fit "
+                "(exact geometry up to the actor's personal deviations), to isolate the detail path; never a default");
   cmd->add_option("--model,-m", model_path, "Detail model (.cdm, from `crease train`)")->required();
   cmd->add_option("--out,-o", out, "Output folder (written under a temporary name, renamed when complete)")->required();
   cmd->add_option("--preview", preview, "Preview video (.avi: MJPG, .mp4: mp4v): the frame with L~^t beside D^t");
@@ -99,7 +102,7 @@ void AddCaptureCommands(CLI::App& app) {
     const double rig_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::printf("rig made compatible with the model's lowpass (Sec. 4.1) in %.1f s\n", rig_s);
     t0 = std::chrono::steady_clock::now();
-    FrameTracker tracker(rig, K, options.tracker, tf.gt_prior, tf.noise, tf.seed, dataset ? info.path : fs::path());
+    FrameTracker tracker(rig, K, options.tracker, tf, dataset ? info.path : fs::path());
     CaptureSession session(rig, model, K, options);
     const double setup_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     std::printf("capture set up (UV raster, geodesics, stencils) in %.1f s\n", setup_s);
@@ -238,7 +241,7 @@ void AddCaptureCommands(CLI::App& app) {
         const int index = frames->index();
         const TrackedFrame t = tracker.Track(frame, index);
         if (writer.isOpened()) pending_images[index] = frame.clone();
-        for (const CapturedFrame& f : session.Process(index, frame, t, tracker.fitter().identity())) emit(f);
+        for (const CapturedFrame& f : session.Process(index, frame, t, tracker.identity())) emit(f);
         ++n;
         progress.Advance();
       }
@@ -275,8 +278,8 @@ void AddCaptureCommands(CLI::App& app) {
       summary["detail_share"] = steady_total > 0 ? steady_detail / steady_total : 0.0;
       summary["timing"] = json::parse(timing.ToJson());
       summary["setup_s"] = setup_s + rig_s;
-      summary["identity"] = std::vector<double>(tracker.fitter().identity().data(),
-                                                tracker.fitter().identity().data() + tracker.fitter().identity().size());
+      const Eigen::VectorXd identity = tracker.identity();
+      summary["identity"] = std::vector<double>(identity.data(), identity.data() + identity.size());
       summary["options"] = json::parse(OptionsToJson(options));
       WriteJsonFile(dir / "capture.json", summary);
       std::printf("captured %d frames: %d tracked, %d with detail, %d patches from a wrinkle map of %d frames\n", n,

@@ -55,7 +55,7 @@ void AddTrackCommand(CLI::App& app) {
     const FaceRig rig = ReadRig(tf.rig_path);
     const CameraIntrinsics K = ResolveIntrinsics(tf.camera_path, info, tf.fov);
     Require(!tf.gt_prior || dataset, "--ground-truth-prior needs a crease sequence dataset as input");
-    FrameTracker tracker(rig, K, options, tf.gt_prior, tf.noise, tf.seed, dataset ? info.path : fs::path());
+    FrameTracker tracker(rig, K, options, tf, dataset ? info.path : fs::path());
     const LandmarkRigFitter& fitter = tracker.fitter();
 
     const fs::path dir(out);

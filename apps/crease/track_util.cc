@@ -9,6 +9,7 @@
 #include "core/color.h"
 #include "core/error.h"
 #include "core/json_io.h"
+#include "eval/rig_correspondence.h"
 #include "eval/tracking_metrics.h"
 
 namespace crease::app {
@@ -44,14 +45,26 @@ CameraIntrinsics ResolveIntrinsics(const std::string& camera_path, const FrameSo
 }
 
 FrameTracker::FrameTracker(const FaceRig& rig, const CameraIntrinsics& intrinsics, const TrackerOptions& options,
-                           bool ground_truth_prior, double noise_px, uint64_t seed,
-                           const std::filesystem::path& dataset)
+                           const TrackingFlags& flags, const std::filesystem::path& dataset)
     : rig_(rig), dataset_(dataset) {
-  if (ground_truth_prior) {
-    Require(!dataset.empty(), "--ground-truth-prior needs a crease sequence dataset as input");
+  Require(!(flags.gt_prior && flags.gt_fit), "--ground-truth-prior and --ground-truth-fit exclude each other");
+  if (flags.gt_prior || flags.gt_fit) {
+    Require(!dataset.empty(), fmt::format("--ground-truth-{} needs a crease sequence dataset as input",
+                                          flags.gt_prior ? "prior" : "fit"));
+  }
+  if (flags.gt_fit) {
+    // The truth's expression weights mean the same shapes only on the truth's rig.
+    const FaceRig truth_rig = ReadRig(dataset / "rig.crig");
+    Require(CorrespondRigs(rig, truth_rig).same_uv,
+            fmt::format("--ground-truth-fit: the rig ({}) is not {}/rig.crig or a part of it; the truth's expression "
+                        "weights would mean other shapes",
+                        rig.source, dataset.string()));
+    gt_fit_ = true;
+    source_ = "ground-truth-fit";
+  } else if (flags.gt_prior) {
     GroundTruthPriorOptions go;
-    go.gt_prior_noise_px = noise_px;
-    go.gt_prior_noise_seed = seed;
+    go.gt_prior_noise_px = flags.noise;
+    go.gt_prior_noise_seed = flags.seed;
     gt_ = std::make_unique<GroundTruthPriorFitter>(rig, intrinsics, options.fit, go);
     source_ = "ground-truth-prior";
   } else {
@@ -66,19 +79,33 @@ TrackedFrame FrameTracker::Track(const cv::Mat& image, int index) {
     t.frame = index;
     return t;
   }
-  TrackedFrame t;
-  t.frame = index;
   const auto t0 = std::chrono::steady_clock::now();
-  t.fit = gt_->Fit(ReadFrameTruth(dataset_, index, -1).landmarks);
+  const FrameTruth truth = ReadFrameTruth(dataset_, index, -1);
+  TrackedFrame t;
+  if (gt_fit_) {
+    t = TruthAsTrackedFrame(rig_, truth, index);
+    if (truth_identity_.size() == 0) truth_identity_ = TruthIdentity(rig_, truth);
+  } else {
+    t.frame = index;
+    t.fit = gt_->Fit(truth.landmarks);
+    t.landmarks = gt_->last_landmarks();
+    t.tracked = true;
+    t.confidence = 1.0;
+  }
   t.fit_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  t.landmarks = gt_->last_landmarks();
-  t.tracked = true;
   t.detected = gt_count_++ == 0;
-  t.confidence = 1.0;
   return t;
 }
 
-const LandmarkRigFitter& FrameTracker::fitter() const { return tracker_ ? tracker_->fitter() : gt_->fitter(); }
+const LandmarkRigFitter& FrameTracker::fitter() const {
+  Require(!gt_fit_, "the ground-truth-fit control has no landmark fitter");
+  return tracker_ ? tracker_->fitter() : gt_->fitter();
+}
+
+Eigen::VectorXd FrameTracker::identity() const {
+  if (gt_fit_) return truth_identity_.size() ? truth_identity_ : Eigen::VectorXd::Zero(rig_.num_identity());
+  return tracker_ ? tracker_->fitter().identity() : gt_->fitter().identity();
+}
 
 std::string FrameTracker::source_name() const { return source_; }
 

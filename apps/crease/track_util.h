@@ -26,11 +26,13 @@ struct TrackingFlags {
   double fov = 50.0;
   int max_frames = -1;
   bool gt_prior = false;  // the ground-truth-prior control
+  bool gt_fit = false;    // the ground-truth-fit control (the truth's pose and expression)
   double noise = 0.0;     // its landmark noise, px
   uint64_t seed = 1;      // its noise seed
 };
 // Adds --input, --rig, --landmarks, --tracker, --camera, --fov, --max-frames,
-// --ground-truth-prior, --noise and --seed to `cmd`.
+// --ground-truth-prior, --noise and --seed to `cmd` (`crease capture` adds
+// --ground-truth-fit itself).
 void AddTrackingFlags(CLI::App* cmd, TrackingFlags* flags);
 
 // The intrinsics of the frames: --camera (a camera JSON), else the dataset's
@@ -38,15 +40,22 @@ void AddTrackingFlags(CLI::App* cmd, TrackingFlags* flags);
 // when they disagree with the frame size.
 CameraIntrinsics ResolveIntrinsics(const std::string& camera_path, const FrameSourceInfo& info, double fov_deg);
 
-// The global tracker of the options, or — the experimental control of issue 5 —
-// the rig fitted to a dataset's ground-truth landmark projections plus noise.
+// The global tracker of the options, or one of two experimental controls on a
+// crease sequence dataset: the rig fitted to the ground-truth landmark projections
+// plus noise (issue 5), or the truth's own pose, expression weights and identity
+// (issue 17: exact geometry up to the actor's personal deviations; needs the
+// dataset's rig or a part of it, such as its tracking rig).
 class FrameTracker {
  public:
-  // `dataset`: the sequence dataset (needed for the ground-truth prior).
+  // `flags`: gt_prior / gt_fit choose a control (not both); `dataset`: the sequence
+  // dataset (needed for the controls). Throws Error naming what is missing.
   FrameTracker(const FaceRig& rig, const CameraIntrinsics& intrinsics, const TrackerOptions& options,
-               bool ground_truth_prior, double noise_px, uint64_t seed, const std::filesystem::path& dataset);
+               const TrackingFlags& flags, const std::filesystem::path& dataset);
   // Tracks `image` (linear RGB), frame number `index`.
   TrackedFrame Track(const cv::Mat& image, int index);
+  // The identity α the frames were tracked with (the truth's under the ground-truth fit).
+  Eigen::VectorXd identity() const;
+  // The landmark fitter (throws Error under the ground-truth fit, which has none).
   const LandmarkRigFitter& fitter() const;
   std::string source_name() const;
 
@@ -56,6 +65,8 @@ class FrameTracker {
   std::string source_;
   std::unique_ptr<FaceTracker> tracker_;
   std::unique_ptr<GroundTruthPriorFitter> gt_;
+  bool gt_fit_ = false;
+  Eigen::VectorXd truth_identity_;
   int gt_count_ = 0;
 };
 
