@@ -277,11 +277,11 @@ struct FlowRefiner::Impl {
   bool has_prev = false;
   // The adaptive pull (PullToTracker): the flow chain's error variance P and the two
   // averaged estimates of the tracker's noise variance, px² per coordinate (−1: none yet).
-  double chain_variance = -1.0, noise_innovation = -1.0, noise_second_difference = -1.0;
+  double chain_variance = -1.0, noise_innovation = -1.0, noise_difference = -1.0;
   std::vector<cv::Mat> prev_pyramid;
   MatX2d prev_refined;    // ũ^{t−1}: projection of L~^{t−1} at the flow points
   MatX2d prev_projected;  // u^{t−1}
-  MatX2d prev2_projected;  // u^{t−2} (NaN where unknown)
+  MatX2d prev2_projected, prev3_projected;  // u^{t−2}, u^{t−3} (NaN where unknown)
   std::vector<uint8_t> prev_visible;
 
   Impl(const FaceRig& r, const CameraIntrinsics& k, const FlowRefinementOptions& o) : rig(r), K(k), options(o) {}
@@ -572,28 +572,31 @@ void FlowRefiner::Impl::PullToTracker(const MatX2d& u, MatX2d* flow, std::vector
     // forehead under fast motion) are not Gaussian. For a 2D Gaussian with variance
     // σ² per coordinate, the median of |x|² is 2 ln 2 · σ².
     const double to_variance = 1.0 / (2.0 * std::log(2.0));
-    std::vector<double> innovation, motion, second;
+    std::vector<double> innovation, motion, third;
     for (int i : trusted) {
       innovation.push_back((u.row(i) - flow->row(i)).squaredNorm());
       motion.push_back((flow->row(i) - prev_refined.row(i)).squaredNorm());
-      const Eigen::RowVector2d d2 = u.row(i) - 2.0 * prev_projected.row(i) + prev2_projected.row(i);
-      if (d2.allFinite()) second.push_back(d2.squaredNorm());
+      const Eigen::RowVector2d d3 =
+          u.row(i) - 3.0 * prev_projected.row(i) + 3.0 * prev2_projected.row(i) - prev3_projected.row(i);
+      if (d3.allFinite()) third.push_back(d3.squaredNorm());
     }
     // LK's step noise grows with the motion (its bias is a fraction of it).
     const double sigma_q = o.flow_step_sigma_px + o.flow_step_sigma_ratio * std::sqrt(Median(motion) * to_variance);
     const double q = sigma_q * sigma_q;
     const double prior = std::max(chain_variance, 0.0) + q;  // P⁻ of the flow chain
     // The tracker's noise r, bounded twice from above: the innovations (E[ν²] = P⁻ + r;
-    // too high when LK failed beyond σ_q) and the tracker's second differences over
-    // time (6 r for white noise; too high under fast acceleration). Both averaged
-    // over frames at flow_noise_rate; r is the smaller.
+    // too high when LK failed beyond σ_q) and the tracker's third differences over
+    // time (20 r for white noise; the true motion adds its third difference, ~0.2³ of
+    // its amplitude for a 1 Hz motion at 30 frames/s, where second differences let in
+    // 0.2²: on fast motion they read 0.9 px of noise into a tracker with 0.1 px).
+    // Both averaged over frames at flow_noise_rate; r is the smaller.
     auto average = [&](double* state, double value) {
       *state = *state < 0.0 ? value : (1.0 - o.flow_noise_rate) * *state + o.flow_noise_rate * value;
       return *state;
     };
     double r = average(&noise_innovation, std::max(Median(innovation) * to_variance - prior, 0.0));
-    if (second.size() >= 3) r = std::min(r, average(&noise_second_difference, Median(second) * to_variance / 6.0));
-    else if (noise_second_difference >= 0.0) r = std::min(r, noise_second_difference);
+    if (third.size() >= 3) r = std::min(r, average(&noise_difference, Median(third) * to_variance / 20.0));
+    else if (noise_difference >= 0.0) r = std::min(r, noise_difference);
     r = std::max(r, 1e-4);
     kappa = prior / (prior + r);  // the Kalman gain of this frame
     chain_variance = (1.0 - kappa) * prior;
@@ -952,9 +955,10 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
   // State for the next frame: ũ^t of L~^t at the flow points.
   auto remember = [&] {
     s.prev_refined = s.Project(out.vertices);
-    s.prev2_projected = s.has_prev && s.prev_projected.rows() == u.rows()
-                            ? s.prev_projected
-                            : MatX2d::Constant(u.rows(), 2, std::numeric_limits<double>::quiet_NaN());
+    const MatX2d unknown = MatX2d::Constant(u.rows(), 2, std::numeric_limits<double>::quiet_NaN());
+    const bool chained = s.has_prev && s.prev_projected.rows() == u.rows();
+    s.prev3_projected = chained && s.prev2_projected.rows() == u.rows() ? s.prev2_projected : unknown;
+    s.prev2_projected = chained ? s.prev_projected : unknown;
     s.prev_projected = u;
     s.prev_visible = vis;
     s.prev_pyramid = std::move(pyramid);

@@ -105,12 +105,14 @@
 //      2.3 px per step, 6.5 px on the forehead. Hence σ_q grows with the motion.
 //      The tracker's noise r is the smaller of two upper bounds, both from medians
 //      (robust to LK's failures): the innovations minus the chain's P⁻ (too high
-//      when LK fails beyond σ_q) and the tracker's second differences over time
-//      (too high under fast acceleration). A version with one steady-state gain from
-//      the mean innovation served talking but read a fast-motion chain's LK failures
-//      as tracker noise, pulled less and less, and lost it (ground-truth prior,
-//      fast-motion: 2.0 → 5.5 px). Innovations beyond flow_gate_chi2 × (P⁻ + r) are
-//      outliers. Measured (2D vertex error coarse → refined, jitter coarse → refined):
+//      when LK fails beyond σ_q) and the tracker's third differences over time (the
+//      true motion leaks in less than into second differences, which read 0.9 px of
+//      noise into a fast-motion ground-truth fit). A version with one steady-state
+//      gain from the mean innovation served talking but read a fast-motion chain's LK
+//      failures as tracker noise, pulled less and less, and lost it (ground-truth
+//      prior, fast-motion: 2.0 → 5.5 px). Innovations beyond flow_gate_chi2 ×
+//      (P⁻ + r) are outliers. Measured (2D vertex error coarse → refined, jitter
+//      coarse → refined), before the third differences unless said:
 //        quickstart sequence (ICT actor 101, workout-talking, 640×480, first 120
 //        frames), ground-truth prior: κ = 0 with ξ_β = 5 px 2.07 → 2.20 px (the
 //        trusted points' error jumps 1.1 px above u^t's at frame 4, when the
@@ -122,6 +124,11 @@
 //        a fast-motion clip (91 frames), ground-truth prior 2.01 → 1.99 px,
 //        jitter 0.33 → 0.38 px (no gate 2.04, 0.43; χ² 9.21 1.97, 0.37);
 //        regressor 8.87 → 8.21 px;
+//        with third differences (the default): quickstart ground-truth prior 2.07 →
+//        2.04 px (jitter 0.135 → 0.113), regressor 5.93 → 5.39 px (3.36 → 0.81),
+//        ground-truth fit 0.68 → 0.38 px (aligned 3D 0.68 → 0.43 mm); fast-motion
+//        clip ground-truth prior 2.01 → 1.94 px (jitter 0.325 → 0.302), regressor
+//        8.87 → 8.23 px, ground-truth fit 0.47 → 0.40 px (jitter 0.026 → 0.041);
 //        tracking-refinement, paper profile, 3 seeds: see reports/REPRODUCTION.md.
 //      In tests/flow_refinement_test.cc (8 frames, a jittery but unbiased tracker)
 //      κ settles at 0.28 (1.0 for the same frames with the true fit) and the
@@ -186,7 +193,7 @@ struct FlowRefinementOptions {
   // points: LK predicts with step noise σ_q = flow_step_sigma_px +
   // flow_step_sigma_ratio × the frame's median LK motion (per coordinate; LK's error
   // grows with the motion), the tracker observes with noise r estimated from the
-  // innovations u^t − ũ^t and from the tracker's second differences over time
+  // innovations u^t − ũ^t and from the tracker's third differences over time
   // (medians, averaged over frames at rate flow_noise_rate; the smaller of the two):
   // a steady tracker pulls hard, a jittery one little. Else κ = flow_tracker_pull
   // (0 = the paper's pure flow chain).
