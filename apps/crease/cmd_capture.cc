@@ -161,6 +161,8 @@ void AddCaptureCommands(CLI::App& app) {
                              {"pull", f.refinement.pull},
                              {"tracker_noise_px", f.refinement.tracker_noise_px},
                              {"step_sigma_px", f.refinement.step_sigma_px},
+                             {"gate_outliers", f.refinement.gate_outliers},
+                             {"reference_tracked", f.refinement.reference_tracked},
                              {"cam_from_head", PoseJson(f.refinement.fit.cam_from_head)}};
         }
         j["timing_ms"] = {{"landmarks", ct.landmarks_ms}, {"fit", ct.fit_ms},          {"visibility", ct.visibility_ms},

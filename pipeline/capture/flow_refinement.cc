@@ -37,6 +37,8 @@ void FlowRefinementOptions::VisitFields(OptionVisitor& v) {
   v.Field("flow_step_sigma_ratio", flow_step_sigma_ratio);
   v.Field("flow_noise_rate", flow_noise_rate);
   v.Field("flow_gate_chi2", flow_gate_chi2);
+  v.Field("flow_reference_frame", flow_reference_frame);
+  v.Field("flow_reference_max_px", flow_reference_max_px);
   v.Field("outlier_intensity", outlier_intensity);
   v.Field("outlier_distance_px", outlier_distance_px);
   v.Field("flow_point_spacing_mm", flow_point_spacing_mm);
@@ -74,6 +76,7 @@ void FlowRefinementOptions::Check() const {
   CheckGt(o, "flow_noise_rate", flow_noise_rate, 0.0);
   CheckLe(o, "flow_noise_rate", flow_noise_rate, 1.0);
   CheckGe(o, "flow_gate_chi2", flow_gate_chi2, 0.0);
+  CheckGt(o, "flow_reference_max_px", flow_reference_max_px, 0.0);
   CheckGt(o, "outlier_intensity", outlier_intensity, 0.0);
   CheckGt(o, "outlier_distance_px", outlier_distance_px, 0.0);
   CheckGt(o, "flow_point_spacing_mm", flow_point_spacing_mm, 0.5);
@@ -282,6 +285,9 @@ struct FlowRefiner::Impl {
   MatX2d prev_refined;    // ũ^{t−1}: projection of L~^{t−1} at the flow points
   MatX2d prev_projected;  // u^{t−1}
   MatX2d prev2_projected, prev3_projected;  // u^{t−2}, u^{t−3} (NaN where unknown)
+  // The reference frame of flow_reference_frame: the chain's first frame.
+  std::vector<cv::Mat> reference_pyramid;
+  MatX2d reference_positions;  // u at that frame (NaN: not visible then)
   std::vector<uint8_t> prev_visible;
 
   Impl(const FaceRig& r, const CameraIntrinsics& k, const FlowRefinementOptions& o) : rig(r), K(k), options(o) {}
@@ -293,6 +299,13 @@ struct FlowRefiner::Impl {
   MatX3d ToCamera(const Eigen::VectorXd& head, const Rigid3d& pose) const;
   // Projections of the flow points of `camera_vertices` (#V×3), px; NaN behind the camera.
   MatX2d Project(const MatX3d& camera_vertices) const;
+  // Sec. 7's suggestion (flow_reference_frame): re-tracks the trusted points from the
+  // chain's first frame, starting at their chained positions, and keeps the result
+  // where it passes ξ_α against the reference and stays within
+  // flow_reference_max_px of the chain (out->reference_tracked counts them). At a
+  // chain's first frame it stores that frame as the reference.
+  void TrackFromReference(const std::vector<cv::Mat>& pyramid, const MatX2d& u, const std::vector<uint8_t>& vis,
+                          MatX2d* flow, const std::vector<FlowPointStatus>& status, RefinedFrame* out);
   // Moves the trusted flow points κ of the way to u^t (Differences 10); updates the
   // innovation statistics; records κ and σ_r in `out`.
   void PullToTracker(const MatX2d& u, MatX2d* flow, std::vector<FlowPointStatus>* status, RefinedFrame* out);
@@ -559,6 +572,46 @@ MatX3d FlowRefiner::Impl::ToCamera(const Eigen::VectorXd& head, const Rigid3d& p
   return out;
 }
 
+void FlowRefiner::Impl::TrackFromReference(const std::vector<cv::Mat>& pyramid, const MatX2d& u,
+                                            const std::vector<uint8_t>& vis, MatX2d* flow,
+                                            const std::vector<FlowPointStatus>& status, RefinedFrame* out) {
+  const FlowRefinementOptions& o = options;
+  if (!has_prev || reference_pyramid.empty()) {  // a chain starts here
+    reference_pyramid = pyramid;
+    reference_positions = u;
+    for (int i = 0; i < u.rows(); ++i)
+      if (!vis[i]) reference_positions.row(i).setConstant(std::numeric_limits<double>::quiet_NaN());
+    return;
+  }
+  std::vector<int> idx;
+  std::vector<cv::Point2f> from, to;
+  for (size_t i = 0; i < status.size(); ++i) {
+    if (status[i] != FlowPointStatus::kTrusted || !reference_positions.row(i).allFinite()) continue;
+    idx.push_back(static_cast<int>(i));
+    from.emplace_back(static_cast<float>(reference_positions(i, 0)), static_cast<float>(reference_positions(i, 1)));
+    to.emplace_back(static_cast<float>((*flow)(i, 0)), static_cast<float>((*flow)(i, 1)));
+  }
+  if (idx.empty()) return;
+  std::vector<uint8_t> lk_status;
+  std::vector<float> lk_error;
+  const cv::Size win(o.lk_window, o.lk_window);
+  cv::calcOpticalFlowPyrLK(reference_pyramid, pyramid, from, to, lk_status, lk_error, win, o.lk_pyramid_levels - 1,
+                           cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, o.lk_max_iterations,
+                                            o.lk_epsilon_px),
+                           cv::OPTFLOW_USE_INITIAL_FLOW, o.lk_min_eigenvalue);
+  for (size_t k = 0; k < idx.size(); ++k) {
+    const int i = idx[k];
+    if (!lk_status[k] || !std::isfinite(to[k].x) || !std::isfinite(to[k].y)) continue;
+    const Eigen::RowVector2d p(to[k].x, to[k].y);
+    if ((p - flow->row(i)).norm() > o.flow_reference_max_px) continue;
+    if (p.x() < 0 || p.y() < 0 || p.x() > K.width - 1 || p.y() > K.height - 1) continue;
+    const double d = std::abs(Bilinear8(reference_pyramid[0], from[k].x, from[k].y) - Bilinear8(pyramid[0], p.x(), p.y())) / 255.0;
+    if (d > o.outlier_intensity) continue;
+    flow->row(i) = p;
+    ++out->reference_tracked;
+  }
+}
+
 void FlowRefiner::Impl::PullToTracker(const MatX2d& u, MatX2d* flow, std::vector<FlowPointStatus>* status,
                                       RefinedFrame* out) {
   const FlowRefinementOptions& o = options;
@@ -785,6 +838,7 @@ int FlowRefiner::num_chart_vertices() const { return static_cast<int>(impl_->cha
 
 void FlowRefiner::Reset() {
   impl_->has_prev = false;
+  impl_->reference_pyramid.clear();
   impl_->chain_variance = -1.0;  // the next chain starts at u^t
   impl_->prev_pyramid.clear();
 }
@@ -938,6 +992,7 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
       }
     }
   }
+  if (o.flow_reference_frame) s.TrackFromReference(pyramid, u, vis, &flow, status, &out);
   s.PullToTracker(u, &flow, &status, &out);
   out.flow_ms = pyramid_ms + MsSince(t0);
 

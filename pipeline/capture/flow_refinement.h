@@ -151,6 +151,14 @@
 //      the pull of Differences 10 bounds the drift that ξ_β was for. Regressor,
 //      κ = 0.2: 5.58 px at ξ_β = 5, 5.45 at 10, 5.38 at 20; the ground-truth-prior
 //      run is unchanged (2.06–2.07 px).
+//  14. Sec. 7 suggests relating each frame back to a reference frame against drift;
+//      flow_reference_frame does (the chain's first frame, LK started at the chained
+//      position, kept when within 3 px and passing ξ_α), off by default: with the
+//      pull of Differences 10 it changes little (quickstart, 120 frames: ground-
+//      truth prior 2.04 px either way, jitter 0.113 → 0.121 px; regressor 5.39 →
+//      5.31 px, jitter 0.81 → 0.96 px; ground-truth fit 0.38 → 0.36 px; fast-motion
+//      clip: ground-truth prior 1.94 px either way, regressor 8.23 → 8.26 px,
+//      ground-truth fit 0.40 px either way) and costs a second LK pass.
 #pragma once
 
 #include <cstdint>
@@ -206,6 +214,12 @@ struct FlowRefinementOptions {
   // exceeds this multiple of its variance (P⁻ + r per coordinate) is an outlier,
   // like the paper's ξ_β (0 disables). ξ_β stays as an absolute bound.
   double flow_gate_chi2 = 25.0;
+  // Sec. 7's suggestion, off by default (Differences 14): also track each trusted
+  // point from the chain's first frame (the reference), starting at its chained
+  // position, and keep that position when it passes ξ_α against the reference and
+  // lies within flow_reference_max_px of the chained one.
+  bool flow_reference_frame = false;
+  double flow_reference_max_px = 3.0;
   // ξ_α: intensity outlier threshold on gray in [0, 1] (8-bit / 255), Sec. 5.1.
   double outlier_intensity = 0.02;
   // ξ_β: distance outlier threshold between ũ^t and u^t, px (Sec. 5.1: 5 px; see
@@ -322,6 +336,7 @@ struct RefinedFrame {
   // Outliers by cause (a point counts once, for the first test it failed): LK failed
   // (status 0, or left the image), ξ_α, ξ_β; and visible points without a flow source.
   int lk_failures = 0, intensity_outliers = 0, distance_outliers = 0, no_source = 0;
+  int reference_tracked = 0;  // trusted points re-tracked from the reference frame (flow_reference_frame)
   int gate_outliers = 0;  // trusted by LK and ξ_α, rejected by the innovation gate (flow_gate_chi2)
   // Wall-clock times, ms. flow: pyramid (built in parallel with L^t's evaluation) +
   // LK + ξ_α; mls: ξ_β + MLS; fit: the 3D fit; evaluate: the rig on all vertices
