@@ -268,6 +268,16 @@ def load_experiment(folder, label):
         if os.path.isdir(runs_dir) else []
     if not files:
         exp.notes.append(f"`{label}/runs/` holds no run files.")
+    listed = meta.get("runs")
+    if isinstance(listed, list):
+        # Run files of an earlier plan (another sweep or seed count) stay in runs/ when
+        # the experiment is re-run; only the runs of the last plan are reported.
+        planned = {str(rid) for rid in listed}
+        stale = [f for f in files if os.path.splitext(f)[0] not in planned]
+        for f in stale:
+            exp.notes.append(f"Run file `{label}/runs/{f}` is not among experiment.json's runs (left from an "
+                             "earlier plan of the experiment); it is left out.")
+        files = [f for f in files if f not in stale]
     for f in files:
         path = os.path.join(runs_dir, f)
         try:

@@ -194,6 +194,13 @@ class Report(unittest.TestCase):
         bad_run = "training.num_ferns=80_seed1.json"
         with open(os.path.join(self.results, "ferns", "runs", bad_run), "w") as f:
             f.write('{"run_id": "training.num_ferns=80_seed1", "metrics": {')  # truncated
+        stale = os.path.join(self.results, "ferns", "runs", "training.num_ferns=40_seed1.json")
+        with open(os.path.join(self.results, "ferns", "runs", "training.num_ferns=80_seed2.json")) as f:
+            run = json.load(f)
+        run["run_id"] = "training.num_ferns=40_seed1"
+        run.setdefault("point", {})["training.num_ferns"] = 40
+        with open(stale, "w") as f:
+            json.dump(run, f)
         os.makedirs(os.path.join(self.results, "broken", "runs"))
         with open(os.path.join(self.results, "broken", "experiment.json"), "w") as f:
             f.write("not json")
@@ -206,6 +213,10 @@ class Report(unittest.TestCase):
         md = read(os.path.join(out, "report.md"))
         self.assertIn(f"`ferns/runs/{bad_run}` could not be read", md)
         self.assertIn("broken/experiment.json: cannot read", md)
+        # A run file of an earlier plan (K = 40 is not among experiment.json's runs) is
+        # left out with a note, never mixed into the tables.
+        self.assertIn("`ferns/runs/training.num_ferns=40_seed1.json` is not among", md)
+        self.assertNotIn("| 40 |", md)
         # K = 80 keeps only seed 2; the other experiments are reported as before.
         self.assertIn("| 80 | 1 | 7.30 | 6.60 | 0.450 | 0.0940 | — |", md)
         self.assertIn("| ferns | refinement-2d | reproduced | refined 5.95 ± 0.21 px", md)
