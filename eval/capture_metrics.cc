@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
 
 #include "core/camera.h"
 #include "core/error.h"
@@ -407,6 +408,75 @@ FlowStageErrors PoolFlowStages(const std::vector<FrameCaptureEval>& frames, int*
   return p;
 }
 
+// Accumulates LkFromTruth over the frames of a capture.
+class LkFromTruthMeter {
+ public:
+  explicit LkFromTruthMeter(const json& capture_options) {
+    const json o = capture_options.is_object() ? capture_options : json::object();
+    window_ = o.value("lk_window", 21);
+    levels_ = o.value("lk_pyramid_levels", 3);
+    iterations_ = o.value("lk_max_iterations", 20);
+    epsilon_ = o.value("lk_epsilon_px", 0.03);
+    min_eigenvalue_ = o.value("lk_min_eigenvalue", 1e-4);
+  }
+  // Frame `index` (8-bit gray) with its truth; `flow_vertex`: the capture's flow points.
+  void Add(int index, const cv::Mat& gray8, const FrameTruth& truth, const std::vector<int>& flow_vertex) {
+    if (index == previous_index_ + 1 && !previous_gray_.empty()) Measure(gray8, truth, flow_vertex);
+    previous_index_ = index;
+    previous_gray_ = gray8;
+    previous_px_ = truth.vertices;
+    previous_visible_ = truth.vertex_visible;
+  }
+  void Skip() { previous_index_ = -2; }
+  LkFromTruth Result() const {
+    LkFromTruth r;
+    r.point_steps = n_;
+    if (n_ > 0) {
+      r.motion_px = motion_ / n_;
+      r.error_px = error_ / n_;
+      r.ratio = motion2_ > 0 ? projection_ / motion2_ : 0.0;
+    }
+    return r;
+  }
+
+ private:
+  void Measure(const cv::Mat& gray8, const FrameTruth& truth, const std::vector<int>& flow_vertex) {
+    std::vector<int> ids;
+    std::vector<cv::Point2f> from, to;
+    for (int v : flow_vertex) {
+      if (v >= previous_px_.rows() || v >= truth.vertices.rows() || !previous_visible_[v] || !truth.vertex_visible[v])
+        continue;
+      ids.push_back(v);
+      from.emplace_back(static_cast<float>(previous_px_(v, 0)), static_cast<float>(previous_px_(v, 1)));
+    }
+    if (ids.empty()) return;
+    to = from;
+    std::vector<uint8_t> status;
+    std::vector<float> err;
+    cv::calcOpticalFlowPyrLK(previous_gray_, gray8, from, to, status, err, cv::Size(window_, window_), levels_ - 1,
+                             cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, iterations_, epsilon_),
+                             0, min_eigenvalue_);
+    for (size_t k = 0; k < ids.size(); ++k) {
+      if (!status[k]) continue;
+      const Eigen::Vector2d m = (truth.vertices.row(ids[k]) - previous_px_.row(ids[k])).transpose();
+      const Eigen::Vector2d d(to[k].x - from[k].x, to[k].y - from[k].y);
+      ++n_;
+      motion_ += m.norm();
+      error_ += (d - m).norm();
+      projection_ += d.dot(m);
+      motion2_ += m.squaredNorm();
+    }
+  }
+  int window_ = 21, levels_ = 3, iterations_ = 20;
+  double epsilon_ = 0.03, min_eigenvalue_ = 1e-4;
+  int previous_index_ = -2;
+  cv::Mat previous_gray_;
+  MatX2d previous_px_;
+  std::vector<char> previous_visible_;
+  int n_ = 0;
+  double motion_ = 0, error_ = 0, projection_ = 0, motion2_ = 0;
+};
+
 json FlowStagesJson(const FlowStageErrors& f) {
   return {{"points", f.points},           {"trusted", f.trusted},
           {"recovered", f.recovered},     {"reset", f.reset},
@@ -491,6 +561,12 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   if (options.max_frames >= 0 && static_cast<int>(frames.size()) > options.max_frames) frames.resize(options.max_frames);
 
   MapMoments pooled_face, pooled_wrinkle, pooled_band;
+  LkFromTruthMeter lk_meter(cap.contains("options") ? cap["options"] : json::object());
+  auto frame_path = [&](int index) {
+    std::string pattern = "frames/{frame:06d}.png";
+    if (info.contains("files") && info["files"].contains("frame")) pattern = info["files"]["frame"].get<std::string>();
+    return dataset / fmt::format(fmt::runtime(pattern), fmt::arg("frame", index));
+  };
   MatX2d prev_err_coarse, prev_err_refined;
   cv::Mat prev_band_err;
   int prev_frame = -2, tracked_count = 0;
@@ -560,12 +636,19 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       e.refined_px = sr / visible.size();
       e.prior_px /= visible.size();
     }
+    if (!arrays.flow_vertex.empty() && fs::is_regular_file(frame_path(index))) {
+      cv::Mat img = ReadImage(frame_path(index), /*srgb=*/false), gray, gray8;
+      if (img.channels() == 3) cv::cvtColor(img, gray, cv::COLOR_RGB2GRAY);
+      else if (img.channels() == 4) cv::cvtColor(img, gray, cv::COLOR_RGBA2GRAY);
+      else gray = img;
+      gray.convertTo(gray8, CV_8U, 255.0);
+      lk_meter.Add(index, gray8, truth, arrays.flow_vertex);
+    } else {
+      lk_meter.Skip();
+    }
     if (s.error_vectors.empty() && vectors_target >= 0 && index >= vectors_target && !visible.empty()) {
-      std::string pattern = "frames/{frame:06d}.png";
-      if (info.contains("files") && info["files"].contains("frame")) pattern = info["files"]["frame"].get<std::string>();
-      const fs::path frame_path = dataset / fmt::format(fmt::runtime(pattern), fmt::arg("frame", index));
-      if (fs::is_regular_file(frame_path)) {
-        cv::Mat img = ReadImage(frame_path, /*srgb=*/false), rgb8;
+      if (fs::is_regular_file(frame_path(index))) {
+        cv::Mat img = ReadImage(frame_path(index), /*srgb=*/false), rgb8;
         if (img.channels() == 1) cv::cvtColor(img, img, cv::COLOR_GRAY2RGB);
         if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_RGBA2RGB);
         img.convertTo(rgb8, CV_8U, 255.0);
@@ -693,6 +776,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   // Means.
   s.frames = static_cast<int>(s.per_frame.size());
   s.flow = PoolFlowStages(s.per_frame, &s.flow_frames);
+  s.lk_truth = lk_meter.Result();
   int jitter_frames = 0, d_jitter_frames = 0;
   for (const FrameCaptureEval& e : s.per_frame) {
     if (!e.tracked) continue;
@@ -775,6 +859,12 @@ std::string CaptureEvalSummary::ToJson() const {
                    {"refined_excess_px", refined_px - coarse_px},
                    {"refined_ratio", coarse_px > 0 ? refined_px / coarse_px : 0.0}};
   j["refinement_stages"] = flow_frames > 0 ? FlowStagesJson(flow) : json(nullptr);
+  if (lk_truth.point_steps > 0) {
+    j["lk_from_truth"] = {{"point_steps", lk_truth.point_steps},
+                          {"motion_px", lk_truth.motion_px},
+                          {"error_px", lk_truth.error_px},
+                          {"ratio", lk_truth.ratio}};
+  }
   j["displacement"] = {{"frames", displacement_frames},
                        {"active_frames", active_frames},
                        {"face", ComparisonJson(d_face)},
@@ -897,6 +987,11 @@ std::string CaptureEvalSummary::ToMarkdown() const {
     o << fmt::format("| 3D fit F | {} | {:.2f} | {:.2f} |\n", flow.points, flow.fit_px, flow.coarse_px);
     o << fmt::format("| L~^t (F + Laplacian deformation) | {} | {:.2f} | {:.2f} |\n\n", flow.points,
                      flow.refined_px, flow.coarse_px);
+    if (lk_truth.point_steps > 0) {
+      o << fmt::format("LK from the true positions (the capture's LK settings, {} point-steps): true motion {:.2f} px "
+                       "per frame, LK's error {:.2f} px per step, motion recovered {:.0f} %\n\n",
+                       lk_truth.point_steps, lk_truth.motion_px, lk_truth.error_px, 100.0 * lk_truth.ratio);
+    }
   }
   if (displacement_frames > 0) {
     o << fmt::format("## Displacement D^t (paper Sec. 5.2): {} frames, {} with wrinkles (pooled below)\n\n",

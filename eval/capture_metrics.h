@@ -99,6 +99,17 @@ struct FlowStageErrors {
   double reset_px = 0;
 };
 
+// LK from the true positions (issue 16): each pair of consecutive tracked frames, the
+// flow points' true projections in frame t−1 tracked into frame t with the capture's
+// LK settings (window, levels, stopping), against their true projections in t. It
+// isolates LK's own error from everything the refinement does with it: `ratio` =
+// Σ d·m / Σ |m|² (d: LK's displacement, m: the true one; 1 = unbiased) over all
+// point-steps, the means per point-step.
+struct LkFromTruth {
+  int point_steps = 0;
+  double motion_px = 0, error_px = 0, ratio = 0;
+};
+
 struct FrameCaptureEval {
   int frame = 0;
   bool tracked = false;
@@ -132,6 +143,7 @@ struct CaptureEvalSummary {
   double prior_px = 0, prior_mm = 0;  // the tracking rig's best fit to the truth (mean over tracked frames)
   int flow_frames = 0;
   FlowStageErrors flow;  // means over the frames with flow points (flow_frames)
+  LkFromTruth lk_truth;
   // Displacement, pooled over the texels of the active frames (those whose true
   // wrinkle-band RMS in the wrinkle regions reaches active_reference_rms_mm: a
   // correlation or amplitude ratio of a frame without wrinkles means nothing).

@@ -96,6 +96,7 @@ for f in capture.json rig.crig timings.csv frames/000031.json frames/000031.cfr 
 done
 ok "eval" "$crease" eval --capture "$tmp/cap" --dataset "$tmp/seq" --set surface_every=1 --set surface_mesh_resolution=64
 grep -q "refined L~^t" "$tmp/cap/eval.md" && grep -q '"coarse_px"' "$tmp/cap/eval.json" && [ -s "$tmp/cap/eval_frames.csv" ] \
+  && grep -q "Refinement steps at the flow points" "$tmp/cap/eval.md" && grep -q "LK from the true positions" "$tmp/cap/eval.md" \
   || { echo "FAIL: eval wrote no metrics"; fails=$((fails+1)); }
 bad "capture exists" "already exists" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-prior -o "$tmp/cap"
 # The ground-truth-fit control (issue 17's exact geometry): L^t is the truth up to the
