@@ -25,6 +25,7 @@
 #include "core/uv_raster.h"
 #include "eval/tracking_metrics.h"
 #include "pipeline/capture/capture_io.h"
+#include "pipeline/capture/flow_refinement.h"
 #include "pipeline/capture/hifi_mesh.h"
 #include "pipeline/training/wrinkle_map.h"
 #include "eval/rig_correspondence.h"
@@ -411,13 +412,16 @@ FlowStageErrors PoolFlowStages(const std::vector<FrameCaptureEval>& frames, int*
 // Accumulates LkFromTruth over the frames of a capture.
 class LkFromTruthMeter {
  public:
+  // `capture_options`: the capture's options (capture.json); the refinement's
+  // defaults for what they lack.
   explicit LkFromTruthMeter(const json& capture_options) {
     const json o = capture_options.is_object() ? capture_options : json::object();
-    window_ = o.value("lk_window", 21);
-    levels_ = o.value("lk_pyramid_levels", 3);
-    iterations_ = o.value("lk_max_iterations", 20);
-    epsilon_ = o.value("lk_epsilon_px", 0.03);
-    min_eigenvalue_ = o.value("lk_min_eigenvalue", 1e-4);
+    const FlowRefinementOptions d;
+    window_ = o.value("lk_window", d.lk_window);
+    levels_ = o.value("lk_pyramid_levels", d.lk_pyramid_levels);
+    iterations_ = o.value("lk_max_iterations", d.lk_max_iterations);
+    epsilon_ = o.value("lk_epsilon_px", d.lk_epsilon_px);
+    min_eigenvalue_ = o.value("lk_min_eigenvalue", d.lk_min_eigenvalue);
   }
   // Frame `index` (8-bit gray) with its truth; `flow_vertex`: the capture's flow points.
   void Add(int index, const cv::Mat& gray8, const FrameTruth& truth, const std::vector<int>& flow_vertex) {
@@ -467,8 +471,8 @@ class LkFromTruthMeter {
       motion2_ += m.squaredNorm();
     }
   }
-  int window_ = 21, levels_ = 3, iterations_ = 20;
-  double epsilon_ = 0.03, min_eigenvalue_ = 1e-4;
+  int window_ = 0, levels_ = 0, iterations_ = 0;
+  double epsilon_ = 0, min_eigenvalue_ = 0;
   int previous_index_ = -2;
   cv::Mat previous_gray_;
   MatX2d previous_px_;
@@ -562,6 +566,8 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
 
   MapMoments pooled_face, pooled_wrinkle, pooled_band;
   LkFromTruthMeter lk_meter(cap.contains("options") ? cap["options"] : json::object());
+  std::vector<char> evaluated(static_cast<size_t>(rig.num_vertices()), 0);  // face_ids as a mask
+  for (int i : face_ids) evaluated[i] = 1;
   auto frame_path = [&](int index) {
     std::string pattern = "frames/{frame:06d}.png";
     if (info.contains("files") && info["files"].contains("frame")) pattern = info["files"]["frame"].get<std::string>();
@@ -625,8 +631,6 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     }
     e.visible_vertices = static_cast<int>(visible.size());
     if (!arrays.flow_vertex.empty()) {
-      std::vector<char> evaluated(static_cast<size_t>(rig.num_vertices()), 0);
-      for (int i : face_ids) evaluated[i] = 1;
       e.flow = MeasureFlowStages(arrays, cam, truth.vertices, truth.vertex_visible, evaluated);
       e.has_flow = e.flow.points > 0;
     }
@@ -636,21 +640,26 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       e.refined_px = sr / visible.size();
       e.prior_px /= visible.size();
     }
-    if (!arrays.flow_vertex.empty() && fs::is_regular_file(frame_path(index))) {
-      cv::Mat img = ReadImage(frame_path(index), /*srgb=*/false), gray, gray8;
-      if (img.channels() == 3) cv::cvtColor(img, gray, cv::COLOR_RGB2GRAY);
-      else if (img.channels() == 4) cv::cvtColor(img, gray, cv::COLOR_RGBA2GRAY);
-      else gray = img;
+    // The frame (sRGB-encoded RGB in [0, 1]), read once for LK and the error vectors.
+    const bool draw_vectors =
+        s.error_vectors.empty() && vectors_target >= 0 && index >= vectors_target && !visible.empty();
+    cv::Mat img;
+    if ((!arrays.flow_vertex.empty() || draw_vectors) && fs::is_regular_file(frame_path(index))) {
+      img = ReadImage(frame_path(index), /*srgb=*/false);
+      if (img.channels() == 1) cv::cvtColor(img, img, cv::COLOR_GRAY2RGB);
+      if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_RGBA2RGB);
+    }
+    if (!arrays.flow_vertex.empty() && !img.empty()) {
+      cv::Mat gray, gray8;
+      cv::cvtColor(img, gray, cv::COLOR_RGB2GRAY);
       gray.convertTo(gray8, CV_8U, 255.0);
       lk_meter.Add(index, gray8, truth, arrays.flow_vertex);
     } else {
       lk_meter.Skip();
     }
-    if (s.error_vectors.empty() && vectors_target >= 0 && index >= vectors_target && !visible.empty()) {
-      if (fs::is_regular_file(frame_path(index))) {
-        cv::Mat img = ReadImage(frame_path(index), /*srgb=*/false), rgb8;
-        if (img.channels() == 1) cv::cvtColor(img, img, cv::COLOR_GRAY2RGB);
-        if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_RGBA2RGB);
+    if (draw_vectors) {
+      if (!img.empty()) {
+        cv::Mat rgb8;
         img.convertTo(rgb8, CV_8U, 255.0);
         s.error_vectors = DrawErrorVectors(rgb8, truth.vertices, err_c, err_r, visible, e.coarse_px, e.refined_px,
                                            options.vectors_scale);

@@ -917,15 +917,11 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
     out.coarse_vertices = s.ToCamera(head, tf.cam_from_head);
     const MatX3d& Lc = out.coarse_vertices;
     const int half = o.lk_window / 2;
+    u = s.Project(Lc);
     for (int i = 0; i < nf; ++i) {
+      if (!u.row(i).allFinite()) continue;  // behind the camera
       const int v = s.flow_vertex[i];
       const Eigen::Vector3d X = Lc.row(v).transpose();
-      if (!(X.z() > 1e-6)) {
-        u.row(i).setConstant(std::numeric_limits<double>::quiet_NaN());
-        continue;
-      }
-      u(i, 0) = s.K.fx * X.x() / X.z() + s.K.cx;
-      u(i, 1) = s.K.fy * X.y() / X.z() + s.K.cy;
       bool ok =
           u(i, 0) >= half && u(i, 1) >= half && u(i, 0) <= s.K.width - 1 - half && u(i, 1) <= s.K.height - 1 - half;
       if (ok && !visible.empty()) ok = visible[v] != 0;
