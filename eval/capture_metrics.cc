@@ -23,6 +23,7 @@
 #include "core/options.h"
 #include "core/ray_caster.h"
 #include "core/uv_raster.h"
+#include "eval/detail_truth.h"
 #include "eval/tracking_metrics.h"
 #include "pipeline/capture/capture_io.h"
 #include "pipeline/capture/flow_refinement.h"
@@ -39,6 +40,7 @@ using nlohmann::json;
 void CaptureEvalOptions::VisitFields(OptionVisitor& v) {
   v.Field("surface_every", surface_every);
   v.Field("band_mm", band_mm);
+  v.Field("detail_truth", detail_truth);
   v.Field("wrinkle_regions", wrinkle_regions);
   v.Field("surface_max_distance_mm", surface_max_distance_mm);
   v.Field("surface_mesh_resolution", surface_mesh_resolution);
@@ -56,6 +58,8 @@ void CaptureEvalOptions::Check() const {
   const char* o = "CaptureEvalOptions";
   CheckGe(o, "surface_every", surface_every, 0);
   CheckGt(o, "band_mm", band_mm, 0.0);
+  Require(detail_truth == "extraction" || detail_truth == "wrinkle-layer",
+          fmt::format("{}.detail_truth = '{}': expected extraction or wrinkle-layer", o, detail_truth));
   CheckGt(o, "surface_max_distance_mm", surface_max_distance_mm, 0.0);
   CheckGe(o, "surface_mesh_resolution", surface_mesh_resolution, 8);
   CheckGe(o, "offset_search_mm", offset_search_mm, 0.0);
@@ -90,16 +94,20 @@ double MeanDistance(const MatX3d& a, const MatX3d& b, const std::vector<int>& id
 
 // A float map of R×R texels. `resample`: a square map of another size is resampled
 // to R (the studio writes its truth at its own resolution, the model may use another).
+// A square map resampled to R×R (area averaging down, bilinear up); others unchanged.
+cv::Mat Resampled(const cv::Mat& m, int R) {
+  if (m.rows != m.cols || m.rows == R || m.rows == 0) return m;
+  cv::Mat r;
+  cv::resize(m, r, cv::Size(R, R), 0, 0, m.rows > R ? cv::INTER_AREA : cv::INTER_LINEAR);
+  return r;
+}
+
 cv::Mat ReadMap(const fs::path& path, int R, bool resample = false) {
   Require(fs::is_regular_file(path), fmt::format("{}: missing", path.string()));
   cv::Mat m = ReadImage(path, /*srgb=*/false);
   if (m.channels() > 1) cv::extractChannel(m, m, 0);
   if (m.depth() != CV_32F) m.convertTo(m, CV_32F);
-  if (resample && m.rows == m.cols && m.rows != R && m.rows > 0) {
-    cv::Mat r;
-    cv::resize(m, r, cv::Size(R, R), 0, 0, m.rows > R ? cv::INTER_AREA : cv::INTER_LINEAR);
-    m = r;
-  }
+  if (resample) m = Resampled(m, R);
   Require(m.rows == R && m.cols == R,
           fmt::format("{}: the map is {}×{}, expected {}×{}", path.string(), m.cols, m.rows, R, R));
   return m;
@@ -564,7 +572,21 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   std::vector<int> frames = cap.at("frame_indices").get<std::vector<int>>();
   if (options.max_frames >= 0 && static_cast<int>(frames.size()) > options.max_frames) frames.resize(options.max_frames);
 
-  MapMoments pooled_face, pooled_wrinkle, pooled_band;
+  MapMoments pooled_face, pooled_wrinkle, pooled_band, pooled_layer_band;
+  // The truth of D^t: Sec. 4.1's detail with the model's G (recorded in capture.json
+  // by crease ≥ 0.4; the defaults before), or the wrinkle-layer maps.
+  s.detail_truth = options.detail_truth;
+  std::unique_ptr<DetailTruth> detail_truth;
+  if (options.detail_truth == "extraction" && corr.same_uv) {
+    Require(truth_actor.has_value(), fmt::format("{}: missing; detail_truth = extraction needs the actor (or use "
+                                                 "detail_truth = wrinkle-layer)",
+                                                 actor_path.string()));
+    DetailExtractionOptions g;
+    if (cap.contains("detail_extraction")) {
+      SetOptionsFromJson(cap["detail_extraction"].dump(), (capture / "capture.json").string(), &g);
+    }
+    detail_truth = std::make_unique<DetailTruth>(truth_rig, *truth_actor, g);
+  }
   LkFromTruthMeter lk_meter(cap.contains("options") ? cap["options"] : json::object());
   std::vector<char> evaluated(static_cast<size_t>(rig.num_vertices()), 0);  // face_ids as a mask
   for (int i : face_ids) evaluated[i] = 1;
@@ -694,7 +716,9 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     cv::Mat D;
     if (corr.same_uv && fs::is_regular_file(d_path)) {
       D = ReadMap(d_path, R);
-      const cv::Mat G = ReadMap(TruthMapPath(dataset, info, index), R, /*resample=*/true);
+      const cv::Mat layer = ReadMap(TruthMapPath(dataset, info, index), R, /*resample=*/true);
+      const cv::Mat G = detail_truth ? Resampled(detail_truth->Detail(ExpressionVector(truth_rig, truth.expression)), R)
+                                     : layer;
       e.has_displacement = true;
       e.d_face = CompareMaps(D, G, coverage);
       e.d_wrinkle = CompareMaps(D, G, wrinkle_mask);
@@ -709,6 +733,14 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
             e.d_offset_correlation >= options.offset_min_correlation) {
           e.has_offset = true;
           e.d_offset_mm = shift * mm_per_texel;  // +: D^t's lines lie higher (v grows downwards)
+        }
+      }
+      if (detail_truth) {
+        const cv::Mat Lb = WrinkleBand(
+            Resampled(detail_truth->Wrinkles(ExpressionVector(truth_rig, truth.expression)), R), band_mask);
+        if (CompareMaps(Db, Lb, wrinkle_mask).reference_rms_mm >= options.active_reference_rms_mm) {
+          ++s.layer_active_frames;
+          pooled_layer_band.Add(Db, Lb, wrinkle_mask);
         }
       }
       if (e.d_wrinkle_band.reference_rms_mm >= options.active_reference_rms_mm) {
@@ -835,6 +867,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   s.d_face = pooled_face.Result();
   s.d_wrinkle = pooled_wrinkle.Result();
   s.d_wrinkle_band = pooled_band.Result();
+  s.d_layer_band = pooled_layer_band.Result();
   if (d_jitter_frames > 0) s.d_jitter_mm /= d_jitter_frames;
   Divide(s.surface_frames, &s.surface_coarse);
   Divide(s.surface_frames, &s.surface_meso);
@@ -879,6 +912,9 @@ std::string CaptureEvalSummary::ToJson() const {
                        {"face", ComparisonJson(d_face)},
                        {"wrinkle_regions", ComparisonJson(d_wrinkle)},
                        {"wrinkle_regions_band", ComparisonJson(d_wrinkle_band)},
+                       {"truth", detail_truth},
+                       {"wrinkle_layer_band", ComparisonJson(d_layer_band)},
+                       {"wrinkle_layer_active_frames", layer_active_frames},
                        {"jitter_band_mm", d_jitter_mm},
                        {"offset_frames", offset_frames}};
   if (offset_frames > 0) {  // else not measured (null), never a misleading 0
@@ -1005,10 +1041,16 @@ std::string CaptureEvalSummary::ToMarkdown() const {
   if (displacement_frames > 0) {
     o << fmt::format("## Displacement D^t (paper Sec. 5.2): {} frames, {} with wrinkles (pooled below)\n\n",
                      displacement_frames, active_frames);
+    o << (detail_truth == "extraction"
+              ? "Truth: Sec. 4.1's detail (eval/detail_truth.h), the wrinkle layer beyond the neutral plus the coarse "
+                "expression's medium band that the compatible rig gives up.\n\n"
+              : "Truth: the studio's wrinkle layer (the dataset's expression displacement maps).\n\n");
     o << "| region | RMSE, mm | correlation | amplitude ratio | true RMS, mm |\n|---|---|---|---|---|\n";
     for (const auto& [name, c] : {std::pair<const char*, const MapComparison&>{"face", d_face},
                                   {"wrinkle regions", d_wrinkle},
-                                  {"wrinkle regions, wrinkle band", d_wrinkle_band}}) {
+                                  {"wrinkle regions, wrinkle band", d_wrinkle_band},
+                                  {"the wrinkle layer alone: wrinkle regions, wrinkle band", d_layer_band}}) {
+      if (c.texels == 0) continue;
       o << fmt::format("| {} | {:.4f} | {:.3f} | {:.2f} | {:.4f} |\n", name, c.rmse_mm, c.correlation, Amp(c),
                        c.reference_rms_mm);
     }

@@ -49,6 +49,13 @@ struct CaptureEvalOptions {
   int surface_every = 10;
   // σ of the wrinkle band, mm on the face (as TrainingOptions::validation_band_mm).
   double band_mm = 2.0;
+  // The truth D^t is scored against (eval/detail_truth.h): "extraction" = Sec. 4.1's
+  // detail, the wrinkle layer beyond the neutral plus the coarse expression's medium
+  // band that the compatible rig gives up (what training extracts and the cascade
+  // regresses; needs the dataset's actor.json); "wrinkle-layer" = the dataset's
+  // expression displacement maps (the studio's wrinkle lines alone, the definition
+  // of crease ≤ 0.3). The wrinkle layer alone is reported beside either.
+  std::string detail_truth = "extraction";
   // The regions of the wrinkle metrics (rig region masks).
   std::vector<std::string> wrinkle_regions = {"forehead", "glabella", "left_eye", "right_eye", "left_cheek",
                                               "right_cheek"};
@@ -149,6 +156,11 @@ struct CaptureEvalSummary {
   // correlation or amplitude ratio of a frame without wrinkles means nothing).
   int active_frames = 0;
   MapComparison d_face, d_wrinkle, d_wrinkle_band;
+  // D^t's wrinkle band against the wrinkle layer's alone (the studio's lines, without
+  // the coarse band), wrinkle regions, frames where that layer is active.
+  MapComparison d_layer_band;
+  int layer_active_frames = 0;
+  std::string detail_truth;  // the truth used ("extraction" or "wrinkle-layer")
   double d_jitter_mm = 0;  // mean over consecutive frame pairs
   // Wrinkle offset: mean over the measured frames, and the slide — the mean of the
   // last quarter of the measured frames minus that of the first quarter (for the

@@ -38,6 +38,7 @@ void StudioOptions::VisitFields(OptionVisitor& v) {
   v.Field("light", light);
   v.Field("light_fill", light_fill);
   v.Field("samples_per_axis", samples_per_axis);
+  v.Field("subsurface_mm", subsurface_mm);
   v.Field("motion_blur_subframes", motion_blur_subframes);
   v.Field("shutter", shutter);
   v.Field("occluder", occluder);
@@ -58,6 +59,8 @@ void StudioOptions::Check() const {
   CheckGe(o, "light_fill", light_fill, 0.0);
   CheckGe(o, "samples_per_axis", samples_per_axis, 1);
   CheckLe(o, "samples_per_axis", samples_per_axis, 16);
+  CheckGe(o, "subsurface_mm", subsurface_mm, 0.0);
+  CheckLe(o, "subsurface_mm", subsurface_mm, 20.0);
   CheckGe(o, "motion_blur_subframes", motion_blur_subframes, 1);
   CheckGt(o, "shutter", shutter, 0.0);
   CheckLe(o, "shutter", shutter, 1.0);
@@ -430,6 +433,7 @@ StudioFrame Studio::Render(const Eigen::VectorXd& expression, const SequenceFram
   const Rigid3d world_from_head = WorldFromHead(f);
   RenderOptions ro;
   ro.samples_per_axis = options_.samples_per_axis;
+  ro.subsurface_mm = options_.subsurface_mm;
   ro.passes = true;
   ro.background = {0.02, 0.02, 0.025};
   Rng rng = Rng(options_.seed).Fork(seed);

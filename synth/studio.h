@@ -51,6 +51,7 @@ struct StudioOptions {
   std::string light = "studio";     // light rig when the sequence keys none: a preset or an EXR (LightRigFromSpec)
   double light_fill = 0.15;         // ambient fill under a sequence-driven directional light
   int samples_per_axis = 1;         // anti-aliasing: N×N samples per pixel
+  double subsurface_mm = 0.0;       // skin subsurface blur of the diffuse light (RenderOptions::subsurface_mm)
   int motion_blur_subframes = 5;    // sub-frames over the shutter when the sequence asks for motion blur
   double shutter = 0.5;             // shutter interval as a fraction of the frame time
   bool occluder = true;             // add the occluder sphere when the sequence keys one

@@ -270,6 +270,7 @@ void AddCaptureCommands(CLI::App& app) {
       summary["tracked_frames"] = tracked_n;
       summary["detail_frames"] = detail_n;
       summary["map_resolution"] = model.map_resolution;
+      summary["detail_extraction"] = json::parse(OptionsToJson(model.detail));  // the model's G (eval's truth)
       summary["patches"] = session.layout_fixed() ? session.detail().layout().num_patches() : 0;
       summary["wrinkle_frames"] = session.layout_fixed() ? session.detail().frames_added() : 0;
       summary["steady_frames"] = steady;

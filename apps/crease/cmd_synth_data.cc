@@ -320,9 +320,14 @@ void AddSynthDatasetCommands(CLI::App& app) {
         ->delimiter(',');
     cmd->add_option("--samples", samples_dir, "Write every frame with true (green) and detected (red) landmarks here");
     cmd->add_option("--json", json_out, "Write the report as JSON");
+    static std::vector<std::string> studio_sets, actor_sets;
+    cmd->add_option("--set", studio_sets, "Studio option KEY=VALUE (repeatable; synth/studio.h StudioOptions), e.g. subsurface_mm=1");
+    cmd->add_option("--actor-set", actor_sets, "Actor option KEY=VALUE (repeatable; synth/actor.h ActorOptions)");
     cmd->callback([] {
       const FaceRig rig = ReadRig(rig_path);
       RealismCheckOptions o;
+      if (!studio_sets.empty()) SetOptionsFromJson(SetPairsToJson(studio_sets), "--set", &o.studio);
+      if (!actor_sets.empty()) SetOptionsFromJson(SetPairsToJson(actor_sets), "--actor-set", &o.actor);
       o.actors = actors;
       o.seed = seed;
       if (!lights.empty()) o.lights = SplitComma(lights);

@@ -11,6 +11,7 @@
 #include "core/file_util.h"
 #include "core/options.h"
 #include "core/progress.h"
+#include "eval/detail_truth.h"
 #include "pipeline/training/detail_model.h"
 #include "pipeline/training/trainer.h"
 
@@ -92,6 +93,31 @@ void AddTrainCommands(CLI::App& app) {
       WriteRig(report_dir / "compatible_rig.crig", MakeRigCompatible(rig, model.detail));
       write_report(summary);
       std::printf("wrote %s and the report in %s\n", out.c_str(), report_dir.string().c_str());
+    });
+  }
+  {
+    auto* cmd = app.add_subcommand("eval-extraction",
+                                   "Detail extraction (Sec. 4.1) of a studio scan set against the truth: the wrinkle "
+                                   "layer alone and with the coarse expression's medium band (eval/detail_truth.h)");
+    static std::string scans, config, json_out;
+    static std::vector<std::string> sets;
+    static int actors = 0;
+    cmd->add_option("--scans", scans, "Scan set folder from `crease synth scans`")->required();
+    cmd->add_option("--config", config, "Training options (YAML; the detail extraction's and validation_band_mm are used)");
+    cmd->add_option("--set", sets, "Training option KEY=VALUE (repeatable), e.g. lowpass_bandwidth_mm=2");
+    cmd->add_option("--actors", actors, "Evaluate the first N actors only (0 = all)")->capture_default_str();
+    cmd->add_option("--json", json_out, "Write the rows as JSON");
+    cmd->callback([] {
+      TrainingOptions training;
+      if (!config.empty()) SetOptionsFromYaml(ReadFileToString(config), config, &training);
+      if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &training);
+      ExtractionTruthOptions o;
+      o.detail = training.detail;
+      o.band_mm = training.validation_band_mm;
+      o.max_actors = actors;
+      const ExtractionTruthReport r = EvaluateExtraction(scans, o);
+      std::printf("%s%zu scans in %.1f s\n", r.ToTable().c_str(), r.rows.size(), r.seconds);
+      if (!json_out.empty()) WriteFileAtomic(json_out, [&](std::ostream& out) { out << r.ToJson() << "\n"; });
     });
   }
   {

@@ -1,0 +1,169 @@
+#include "eval/detail_truth.h"
+
+#include <algorithm>
+#include <chrono>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+#include "core/error.h"
+#include "core/json_io.h"
+#include "core/mesh_io.h"
+#include "core/mesh_ops.h"
+#include "eval/tracking_metrics.h"
+#include "pipeline/training/scan_set.h"
+#include "pipeline/training/wrinkle_map.h"
+
+namespace crease {
+
+namespace {
+
+Eigen::VectorXd PaddedIdentity(const FaceRig& rig, const Actor& actor) {
+  Eigen::VectorXd a = Eigen::VectorXd::Zero(rig.num_identity());
+  const Eigen::Index n = std::min<Eigen::Index>(a.size(), actor.identity.size());
+  a.head(n) = actor.identity.head(n);
+  return a;
+}
+
+Eigen::VectorXd Padded(const Eigen::VectorXd& w, int n) {
+  Eigen::VectorXd out = Eigen::VectorXd::Zero(n);
+  const Eigen::Index k = std::min<Eigen::Index>(n, w.size());
+  out.head(k) = w.head(k);
+  return out;
+}
+
+}  // namespace
+
+DetailTruth::DetailTruth(const FaceRig& rig, const Actor& actor, const DetailExtractionOptions& detail)
+    : model_(rig, actor), compatible_(MakeRigCompatible(model_.rig(), detail)) {
+  const FaceRig& personal = model_.rig();
+  delta_ = (personal.expression_basis - compatible_.expression_basis).cast<double>();
+  const int R = actor.options.resolution;
+  raster_ = RasterizeUv(personal.neutral, R, R, "detail truth: the rig's face chart");
+  neutral_wrinkles_ = model_.Frame(Eigen::VectorXd::Zero(personal.num_expressions()), false).expression_displacement;
+  Require(neutral_wrinkles_.rows == R && neutral_wrinkles_.cols == R,
+          fmt::format("detail truth: the actor's wrinkle map is {}×{}, expected {}×{}", neutral_wrinkles_.cols,
+                      neutral_wrinkles_.rows, R, R));
+}
+
+cv::Mat DetailTruth::Wrinkles(const Eigen::VectorXd& expression) const {
+  const Eigen::VectorXd w = Padded(expression, model_.rig().num_expressions());
+  return model_.Frame(w, false).expression_displacement - neutral_wrinkles_;
+}
+
+cv::Mat DetailTruth::CoarseBand(const Eigen::VectorXd& expression) const {
+  const Eigen::VectorXd w = Padded(expression, compatible_.num_expressions());
+  const TriMesh c = compatible_.Evaluate(PaddedIdentity(compatible_, model_.actor()), w);
+  const MatX3d n = VertexNormals(c);
+  const Eigen::VectorXd d = delta_ * w;  // 3#V
+  Eigen::MatrixXd along(c.num_vertices(), 1);
+  for (int v = 0; v < c.num_vertices(); ++v) along(v, 0) = n.row(v).dot(d.segment<3>(3 * v));
+  return InterpolateToUv(raster_, c, along);
+}
+
+cv::Mat DetailTruth::Detail(const Eigen::VectorXd& expression) const {
+  return Wrinkles(expression) + CoarseBand(expression);
+}
+
+}  // namespace crease
+
+namespace crease {
+
+namespace {
+
+Eigen::VectorXd ScanExpression(const FaceRig& rig, const std::filesystem::path& truth_json) {
+  const nlohmann::json j = ReadJsonFile(truth_json);
+  Require(j.contains("expression") && j["expression"].is_object(),
+          fmt::format("{}: no \"expression\" object", truth_json.string()));
+  std::vector<std::pair<std::string, double>> named;
+  for (const auto& [name, w] : j["expression"].items()) {
+    Require(w.is_number(), fmt::format("{}: expression '{}' is not a number", truth_json.string(), name));
+    named.emplace_back(name, w.get<double>());
+  }
+  return ExpressionVector(rig, named);
+}
+
+}  // namespace
+
+ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, const ExtractionTruthOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  const ScanSet set = ReadScanSet(scans);
+  Require(!set.rig.empty(), fmt::format("{}: the scan set names no rig", (scans / "scans.json").string()));
+  const FaceRig rig = ReadRig(set.rig);
+  ExtractionTruthReport report;
+  const int n_actors = options.max_actors > 0 ? std::min<int>(options.max_actors, static_cast<int>(set.actors.size()))
+                                              : static_cast<int>(set.actors.size());
+  for (int a = 0; a < n_actors; ++a) {
+    const ScanActor& sa = set.actors[a];
+    const DetailTruth truth(rig, ReadActor(sa.folder / "actor.json"), options.detail);
+    const int R = truth.resolution();
+    Require(options.detail.map_resolution == R,
+            fmt::format("{}: the actor's maps are {}×{}; set map_resolution = {}", (sa.folder / "actor.json").string(),
+                        R, R, R));
+    std::vector<TriMesh> meshes;
+    std::vector<int> order = {sa.neutral};
+    for (int s = 0; s < static_cast<int>(sa.scans.size()); ++s)
+      if (s != sa.neutral) order.push_back(s);
+    for (int s : order) meshes.push_back(ReadMesh(sa.scans[s].mesh));
+    std::vector<MatX3d> others;
+    for (size_t j = 1; j < meshes.size(); ++j) others.push_back(meshes[j].V);
+    const DetailExtractor extractor(meshes[0], options.detail, sa.scans[sa.neutral].mesh.string(), others);
+    const double sigma = options.band_mm / std::max(MmPerTexel(meshes[0], R), 1e-9);
+    const cv::Mat regions = ValidRegionMask(rig.regions, options.regions, R, extractor.coverage());
+    for (size_t j = 0; j < meshes.size(); ++j) {
+      const ScanEntry& scan = sa.scans[order[j]];
+      const Eigen::VectorXd beta = ScanExpression(rig, scan.mesh.parent_path() / "truth.json");
+      const ExtractedDetail d = extractor.Extract(meshes[j].V, scan.mesh.string());
+      cv::Mat mask, region_mask;
+      cv::bitwise_and(extractor.coverage(), d.valid, mask);
+      cv::bitwise_and(mask, regions, region_mask);
+      const cv::Mat wrinkles = truth.Wrinkles(beta), band = truth.CoarseBand(beta);
+      const cv::Mat detail = wrinkles + band;
+      const WrinkleBandMask bm = MakeWrinkleBandMask(mask, sigma);
+      const cv::Mat db = WrinkleBand(d.displacement, bm);
+      ExtractionTruthRow row{sa.name, scan.name};
+      row.wrinkles = CompareMaps(d.displacement, wrinkles, mask);
+      row.detail = CompareMaps(d.displacement, detail, mask);
+      row.wrinkles_band = CompareMaps(db, WrinkleBand(wrinkles, bm), mask);
+      const cv::Mat detail_b = WrinkleBand(detail, bm);
+      row.detail_band = CompareMaps(db, detail_b, mask);
+      row.detail_regions = CompareMaps(d.displacement, detail, region_mask);
+      row.detail_regions_band = CompareMaps(db, detail_b, region_mask);
+      row.coarse_band_rms_mm = CompareMaps(band, cv::Mat::zeros(band.size(), CV_32F), mask).extracted_rms_mm;
+      report.rows.push_back(row);
+    }
+  }
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return report;
+}
+
+std::string ExtractionTruthReport::ToTable() const {
+  std::string o = fmt::format("{:<10} {:<22} {:>9} {:>8} {:>8} | {:>8} {:>8} {:>8} | {:>8} {:>8}\n", "actor", "scan",
+                              "band RMS", "wr corr", "wr bcorr", "D* RMS", "D* corr", "D* bcorr", "reg corr",
+                              "reg bcorr");
+  for (const auto& r : rows) {
+    o += fmt::format("{:<10} {:<22} {:>9.4f} {:>8.3f} {:>8.3f} | {:>8.4f} {:>8.3f} {:>8.3f} | {:>8.3f} {:>8.3f}\n",
+                     r.actor, r.scan, r.coarse_band_rms_mm, r.wrinkles.correlation, r.wrinkles_band.correlation,
+                     r.detail.reference_rms_mm, r.detail.correlation, r.detail_band.correlation,
+                     r.detail_regions.correlation, r.detail_regions_band.correlation);
+  }
+  return o;
+}
+
+std::string ExtractionTruthReport::ToJson() const {
+  auto cmp = [](const MapComparison& c) {
+    return nlohmann::json{{"texels", c.texels}, {"rmse_mm", c.rmse_mm}, {"correlation", c.correlation},
+                          {"reference_rms_mm", c.reference_rms_mm}, {"extracted_rms_mm", c.extracted_rms_mm}};
+  };
+  nlohmann::json j = nlohmann::json::array();
+  for (const auto& r : rows) {
+    j.push_back({{"actor", r.actor}, {"scan", r.scan}, {"coarse_band_rms_mm", r.coarse_band_rms_mm},
+                 {"wrinkles", cmp(r.wrinkles)}, {"wrinkles_band", cmp(r.wrinkles_band)}, {"detail", cmp(r.detail)},
+                 {"detail_band", cmp(r.detail_band)}, {"detail_regions", cmp(r.detail_regions)},
+                 {"detail_regions_band", cmp(r.detail_regions_band)}});
+  }
+  return nlohmann::json{{"scans", j}, {"seconds", seconds}}.dump(1);
+}
+
+}  // namespace crease

@@ -1,0 +1,97 @@
+// The studio's truth of the detail that paper Sec. 4.1 extracts and Secs. 4.3 and
+// 5.2 regress (issue 17: one definition for extraction and evaluation).
+//
+// Sec. 4.1 defines a scan's detail as D^j = M^j − M_0^j, where M_0^j is the neutral
+// scan carried along by the low frequencies G of the expression: it holds the
+// neutral's own detail (static lines, the person's shape) and the expression's
+// low frequencies, and the compatible rig (MakeRigCompatible) gives up exactly the
+// same band. The studio's wrinkle layer D(β) is only part of that detail: the
+// actor's coarse expression shapes hold medium frequencies of their own (ICT-
+// FaceKit's were built from scans of a person: a smile's cheek bulge and
+// nasolabial fold, a brow raise's forehead rolls), which G removes from M_0^j and
+// from the compatible rig, so every extracted D^j carries them (0.05–0.07 mm RMS
+// on the face in scans without any wrinkle layer, against a wrinkle layer of
+// 0.005–0.03 mm RMS), and so must the truth D^t is scored against:
+//
+//   D*(β) = [D(β) − D(0)] + ⟨(B' − B_c) β, n_c⟩
+//
+// D the actor's wrinkle layer (synth/actor.h; minus its neutral, which M_0^j
+// carries), B' the actor's personal expression basis (PersonalRig), B_c that basis
+// made compatible with the model's G (MakeRigCompatible), n_c the normal of the
+// compatible surface at (α, β). The coarse band is identity-free: the compatible
+// rig keeps the identity modes.
+#pragma once
+
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core/mat.hpp>
+
+#include "core/face_rig.h"
+#include "core/uv_raster.h"
+#include "pipeline/training/detail_extraction.h"
+#include "synth/actor.h"
+
+namespace crease {
+
+class DetailTruth {
+ public:
+  // `rig`: the studio's rig the actor was rendered with (a dataset's rig.crig or a
+  // scan set's rig); `detail`: the G of the model being scored (its
+  // DetailExtractionOptions). Maps are R×R with R the actor's map resolution.
+  DetailTruth(const FaceRig& rig, const Actor& actor, const DetailExtractionOptions& detail);
+
+  // D(β) − D(0): the wrinkle layer beyond the neutral's, mm.
+  cv::Mat Wrinkles(const Eigen::VectorXd& expression) const;
+  // ⟨(B' − B_c) β, n_c⟩ on the face chart (0 elsewhere), mm.
+  cv::Mat CoarseBand(const Eigen::VectorXd& expression) const;
+  // D*(β) = Wrinkles + CoarseBand.
+  cv::Mat Detail(const Eigen::VectorXd& expression) const;
+
+  int resolution() const { return raster_.width; }
+  const ActorModel& model() const { return model_; }
+
+ private:
+  ActorModel model_;
+  FaceRig compatible_;      // the personal rig made compatible (Sec. 4.1)
+  Eigen::MatrixXd delta_;   // 3#V × #E: B' − B_c
+  UvRaster raster_;         // the rig's face chart at R×R
+  cv::Mat neutral_wrinkles_;
+};
+
+}  // namespace crease
+
+namespace crease {
+
+// Detail extraction (Sec. 4.1) of a studio scan set against the truth (the rung
+// below the ladder's R0: do the regression targets hold the detail at all?). Per
+// scan, the extracted D^j against the wrinkle layer alone and against D* (with the
+// coarse band), on the face and in the wrinkle band (both maps minus their
+// Gaussian blur of band_mm), over the face and over `regions`.
+struct ExtractionTruthRow {
+  std::string actor, scan;
+  MapComparison wrinkles, detail;            // face
+  MapComparison wrinkles_band, detail_band;  // face, wrinkle band
+  MapComparison detail_regions, detail_regions_band;  // `regions` only
+  double coarse_band_rms_mm = 0.0;           // RMS of ⟨(B' − B_c)β, n_c⟩ on the face
+};
+struct ExtractionTruthReport {
+  std::vector<ExtractionTruthRow> rows;
+  double seconds = 0.0;
+  std::string ToTable() const;
+  std::string ToJson() const;
+};
+struct ExtractionTruthOptions {
+  DetailExtractionOptions detail;
+  double band_mm = 2.0;  // as TrainingOptions::validation_band_mm
+  std::vector<std::string> regions = {"forehead", "glabella", "left_eye", "right_eye", "left_cheek", "right_cheek"};
+  int max_actors = 0;    // 0 = all
+};
+// `scans`: a folder from `crease synth scans` (each actor folder holds actor.json,
+// each scan truth.json; the set names its rig). Errors name the file.
+ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, const ExtractionTruthOptions& options);
+
+}  // namespace crease
