@@ -10,6 +10,7 @@
 #include <limits>
 #include <set>
 
+#include "core/error.h"
 #include "core/options.h"
 #include "core/rng.h"
 #include "test_util.h"
@@ -69,6 +70,40 @@ std::vector<float> PredictAllSingle(const FernCascade& fc, const Eigen::MatrixXf
 
 bool SameBytes(const std::vector<float>& a, const std::vector<float>& b) {
   return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
+}
+
+// The features' input normalisation (fern_texture_normalization): "gain" cancels a
+// factor on the patch (an actor's albedo, the exposure), "standardize" any affine
+// change of the gray levels; "none" leaves the paper's raw gray levels.
+TEST(FernCascadeTest, TextureNormalisationCancelsAlbedoAndContrast) {
+  std::vector<float> p(16), q(16), r(16);
+  for (int i = 0; i < 16; ++i) p[i] = 0.3f + 0.02f * static_cast<float>(i % 4) - 0.05f * static_cast<float>(i == 5);
+  for (int i = 0; i < 16; ++i) q[i] = 1.7f * p[i];
+  for (int i = 0; i < 16; ++i) r[i] = 0.4f * p[i] + 0.1f;
+  auto normalised = [](std::vector<float> v, const std::string& mode) {
+    NormalizeTexturePatch(v.data(), static_cast<int>(v.size()), mode);
+    return v;
+  };
+  const auto pg = normalised(p, "gain"), qg = normalised(q, "gain"), rg = normalised(r, "gain");
+  const auto ps = normalised(p, "standardize"), rs = normalised(r, "standardize");
+  double mean = 0, var = 0;
+  for (int i = 0; i < 16; ++i) mean += ps[i] / 16.0;
+  for (int i = 0; i < 16; ++i) var += (ps[i] - mean) * (ps[i] - mean) / 16.0;
+  EXPECT_NEAR(mean, 0.0, 1e-6);
+  EXPECT_NEAR(var, 1.0, 1e-5);
+  double gain_vs_offset = 0;
+  for (int i = 0; i < 16; ++i) {
+    EXPECT_NEAR(pg[i], qg[i], 1e-6);  // a factor cancels
+    EXPECT_NEAR(ps[i], rs[i], 1e-5);  // an affine change cancels
+    gain_vs_offset = std::max(gain_vs_offset, static_cast<double>(std::abs(pg[i] - rg[i])));
+  }
+  EXPECT_GT(gain_vs_offset, 0.01);  // "gain" does not cancel an offset
+  EXPECT_EQ(normalised(p, "none"), p);
+  EXPECT_EQ(normalised(std::vector<float>(16, 0.0f), "gain"), std::vector<float>(16, 0.0f));
+  EXPECT_THROW(normalised(p, "bogus"), Error);
+  FernOptions o;
+  o.fern_texture_normalization = "bogus";
+  EXPECT_THROW(o.Check(), Error);
 }
 
 TEST(FernCascadeTest, BinOutputsFollowEq4OnHandMadeBins) {

@@ -12,6 +12,7 @@
 #include "core/options.h"
 #include "core/progress.h"
 #include "eval/detail_truth.h"
+#include "eval/pair_metrics.h"
 #include "pipeline/training/detail_model.h"
 #include "pipeline/training/trainer.h"
 
@@ -27,7 +28,8 @@ void AddTrainCommands(CLI::App& app) {
     auto* scans_opt = cmd->add_option("--scans", scans, "Scan set folder (scans.json; e.g. from `crease synth scans`)");
     auto* pairs_opt = cmd->add_option("--pairs", pairs_in,
                                       "Train the PCA and the cascade (Sec. 4.3) from saved training pairs instead of "
-                                      "scans; only PCA and cascade options may then change");
+                                      "scans (several files: comma-separated); only PCA and cascade options may then "
+                                      "change");
     scans_opt->excludes(pairs_opt);
     cmd->add_option("--save-pairs", pairs_out,
                     "Also save the training pairs (t_i, d_i of Sec. 4.2; CREASPRS file); without --out, stop there");
@@ -55,7 +57,9 @@ void AddTrainCommands(CLI::App& app) {
       };
       auto line = [](const std::string& l) { std::printf("  %s\n", l.c_str()); };
       if (!pairs_in.empty()) {
-        const TrainingPairs pairs = ReadTrainingPairs(pairs_in);
+        std::vector<fs::path> pair_files;
+        for (const auto& p : SplitComma(pairs_in)) pair_files.emplace_back(p);
+        const TrainingPairs pairs = ReadTrainingPairs(pair_files);
         const TrainingOptions options = OptionsForPairs(pairs, pairs_in, apply_user_options);
         std::printf("training the PCA and the cascade on %lld pairs of %s\n", static_cast<long long>(pairs.texture.rows()),
                     pairs_in.c_str());
@@ -127,6 +131,20 @@ void AddTrainCommands(CLI::App& app) {
     static std::string path;
     cmd->add_option("model", path, "Detail model file")->required();
     cmd->callback([] { std::printf("%s", DescribeDetailModel(ReadDetailModel(path)).c_str()); });
+    auto* eval_cmd = model_cmd->add_subcommand(
+        "eval-pairs", "The model's patch regression (Sec. 4.3) on training pairs, seen or held out (issue 17's rung R0)");
+    static std::string eval_model, eval_pairs, eval_json;
+    eval_cmd->add_option("model", eval_model, "Detail model file")->required();
+    eval_cmd->add_option("--pairs", eval_pairs, "Pair files (from `crease train --save-pairs`), comma-separated")
+        ->required();
+    eval_cmd->add_option("--json", eval_json, "Write the metrics as JSON");
+    eval_cmd->callback([] {
+      std::vector<fs::path> paths;
+      for (const auto& p : SplitComma(eval_pairs)) paths.emplace_back(p);
+      const PairRegressionMetrics m = EvaluatePairs(ReadDetailModel(eval_model), ReadTrainingPairs(paths), eval_pairs);
+      std::printf("%s", m.ToTable().c_str());
+      if (!eval_json.empty()) WriteFileAtomic(eval_json, [&](std::ostream& out) { out << m.ToJson() << "\n"; });
+    });
   }
 }
 

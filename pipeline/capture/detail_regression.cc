@@ -377,7 +377,7 @@ cv::Mat DetailRegressor::Regress(const cv::Mat& gray, const cv::Mat& seen, Detai
   const cv::Mat src = gray.isContinuous() ? gray : gray.clone();
   Eigen::MatrixXf sampled;  // N × n, column-major (PatchSampler's layout)
   m.sampler->Sample(src, &sampled);
-  const RowMatrixXf patches = sampled;  // one patch per row, for PredictBatch
+  RowMatrixXf patches = sampled;  // one patch per row, for RegressBatch
   const std::vector<uint8_t> drop = m.Drops(src, seen);
   int dropped = 0;
   for (uint8_t d : drop) dropped += d;
@@ -387,11 +387,7 @@ cv::Mat DetailRegressor::Regress(const cv::Mat& gray, const cv::Mat& seen, Detai
   // 2. Eq. 6: c_i = c̄ + Σ_k R^k(t_i).
   t0 = Clock::now();
   RowMatrixXf c(N, Dim);
-  if (m.model.baseline.empty()) {
-    m.model.cascade.PredictBatch(patches.data(), N, c.data());
-  } else {  // the detail-accuracy experiment's baselines (pipeline/training/patch_baselines.h)
-    m.model.baseline.PredictBatch(patches.data(), N, c.data());
-  }
+  m.model.RegressBatch(patches.data(), N, c.data());
   t.regress_ms = MsSince(t0);
 
   // 3. d_i = mean + basis · c_i (dropped patches: 0), in fixed column blocks.

@@ -429,16 +429,20 @@ void MapMoments::Add(const cv::Mat& extracted, const cv::Mat& reference, const c
     const float* y = reference.ptr<float>(j);
     const uint8_t* k = mask.ptr<uint8_t>(j);
     for (int i = 0; i < extracted.cols; ++i) {
-      if (!k[i] || !std::isfinite(x[i]) || !std::isfinite(y[i])) continue;
-      sx += x[i];
-      sy += y[i];
-      sxx += double(x[i]) * x[i];
-      syy += double(y[i]) * y[i];
-      sxy += double(x[i]) * y[i];
-      se += (double(x[i]) - y[i]) * (double(x[i]) - y[i]);
-      ++n;
+      if (k[i]) AddValue(x[i], y[i]);
     }
   }
+}
+
+void MapMoments::AddValue(double x, double y) {
+  if (!std::isfinite(x) || !std::isfinite(y)) return;
+  sx += x;
+  sy += y;
+  sxx += x * x;
+  syy += y * y;
+  sxy += x * y;
+  se += (x - y) * (x - y);
+  ++n;
 }
 
 MapComparison MapMoments::Result() const {

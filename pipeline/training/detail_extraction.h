@@ -158,6 +158,7 @@ struct MapMoments {
   int64_t n = 0;
   double sx = 0, sy = 0, sxx = 0, syy = 0, sxy = 0, se = 0;
   void Add(const cv::Mat& extracted, const cv::Mat& reference, const cv::Mat& mask);
+  void AddValue(double extracted, double reference);  // one sample (skipped unless both finite)
   MapComparison Result() const;
 };
 

@@ -36,6 +36,19 @@ void DetailModel::Validate(const std::string& what) const {
   }
 }
 
+void DetailModel::RegressBatch(float* patches, int N, float* c) const {
+  const int n = pca.patch_pixels();
+  const std::string& mode = cascade.options.fern_texture_normalization;
+  if (mode != "none") {
+    for (int i = 0; i < N; ++i) NormalizeTexturePatch(patches + static_cast<size_t>(i) * n, n, mode);
+  }
+  if (baseline.empty()) {
+    cascade.PredictBatch(patches, N, c);
+  } else {  // the detail-accuracy experiment's baselines (patch_baselines.h)
+    baseline.PredictBatch(patches, N, c);
+  }
+}
+
 void WriteDetailModel(const std::filesystem::path& path, const DetailModel& model) {
   model.Validate(path.string());
   json header;

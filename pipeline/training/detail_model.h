@@ -39,6 +39,12 @@ struct DetailModel {
   // Throws Error (starting with `what`) when the parts disagree: patch size vs PCA
   // pixels vs cascade inputs, PCA dimensions vs cascade outputs.
   void Validate(const std::string& what) const;
+
+  // Eq. 6 for N texture patches (N × n floats, one after another): each is
+  // normalised in place (cascade.options.fern_texture_normalization), then mapped
+  // to D coefficients (N × D floats in `c`) by the baseline when there is one, else
+  // by the cascade.
+  void RegressBatch(float* patches, int N, float* c) const;
 };
 
 void WriteDetailModel(const std::filesystem::path& path, const DetailModel& model);

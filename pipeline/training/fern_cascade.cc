@@ -435,6 +435,7 @@ void FernOptions::VisitFields(OptionVisitor& v) {
   v.Field("fern_threshold_rule", fern_threshold_rule);
   v.Field("fern_threshold_range", fern_threshold_range);
   v.Field("fern_pair_selection", fern_pair_selection);
+  v.Field("fern_texture_normalization", fern_texture_normalization);
 }
 
 void FernOptions::Check() const {
@@ -450,6 +451,7 @@ void FernOptions::Check() const {
   CheckGt(o, "fern_threshold_range", fern_threshold_range, 0.0);
   CheckLe(o, "fern_threshold_range", fern_threshold_range, 1.0);
   CheckOneOf(o, "fern_pair_selection", fern_pair_selection, {"correlation", "random"});
+  CheckOneOf(o, "fern_texture_normalization", fern_texture_normalization, {"none", "gain", "standardize"});
 }
 
 // ---------------------------------------------------------------------------
@@ -823,6 +825,35 @@ void FernCascade::Check(const std::string& what) const {
     Require(std::isfinite(outputs[i]),
             fmt::format("{}: bin output entry {} (fern {}) is not finite", what, i,
                         i / (static_cast<size_t>(num_bins()) * dimensions)));
+}
+
+void NormalizeTexturePatch(float* patch, int n, const std::string& mode) {
+  if (mode == "none" || n <= 0) return;
+  double sum = 0.0;
+  for (int i = 0; i < n; ++i) sum += patch[i];
+  const double mean = sum / n;
+  double scale = mean, offset = 0.0;
+  if (mode == "standardize") {
+    double ss = 0.0;
+    for (int i = 0; i < n; ++i) ss += (patch[i] - mean) * (patch[i] - mean);
+    scale = std::sqrt(ss / n);
+    offset = mean;
+  } else {
+    Require(mode == "gain", fmt::format("texture normalisation '{}': expected none, gain or standardize", mode));
+  }
+  if (!(std::abs(scale) >= 1e-6)) {
+    std::fill(patch, patch + n, 0.0f);
+    return;
+  }
+  for (int i = 0; i < n; ++i) patch[i] = static_cast<float>((patch[i] - offset) / scale);
+}
+
+Eigen::MatrixXf NormalizeTexturePatches(const Eigen::MatrixXf& patches, const std::string& mode) {
+  using RowMatrixXf = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  RowMatrixXf rows = patches;
+  const int n = static_cast<int>(rows.cols());
+  for (Eigen::Index i = 0; i < rows.rows(); ++i) NormalizeTexturePatch(rows.row(i).data(), n, mode);
+  return rows;
 }
 
 }  // namespace crease

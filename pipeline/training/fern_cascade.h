@@ -53,6 +53,12 @@
 //      n = 1024, K = 1280, P = 50 this is ~6× less work than K separate P×P
 //      covariances); larger patches compute it per fern. The F directions of a fern
 //      are drawn together, since the residuals do not change within a fern.
+//   7. fern_texture_normalization (not in the paper; default "none", the paper's raw
+//      gray levels) divides each texture patch by its mean ("gain") or standardises it,
+//      so the features respond to shading rather than to an actor's skin tone.
+//      Measured (issue 17, rung R0: the quickstart's 4 training actors, leave one actor
+//      out, pair level): held-out correlation 0.29 → 0.31 for either; seen pairs 0.91
+//      with or without. It does not close the gap between seen and held-out actors.
 //
 // Speed (bench/fern_cascade_bench, 2-vCPU Sapphire Rapids, shared with other jobs):
 // PredictBatch on one core at F = 5, D = 16, w = 32: 4.2 / 2.5 / 1.5 µs per patch at
@@ -88,11 +94,24 @@ struct FernOptions {
   double fern_threshold_range = 0.2;  // "range" rule: central fraction of [min, max], (0, 1]
   // "correlation" (Cao et al. 2012, the paper) or "random" (ablation: a random pair of the P pixels).
   std::string fern_pair_selection = "correlation";
+  // The texture patch t_i the features read (NormalizeTexturePatch; not in the paper,
+  // which feeds raw gray levels): "none" (the paper), "gain" (divided by the patch's
+  // mean: shading = albedo × irradiance, so an actor's lighter or darker skin and the
+  // exposure cancel) or "standardize" (zero mean, unit standard deviation: contrast
+  // cancels too). Applies to the baselines as well.
+  std::string fern_texture_normalization = "none";
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
   bool operator==(const FernOptions&) const = default;
 };
+
+// The patch features' input (FernOptions::fern_texture_normalization) applied in
+// place to one patch of n gray levels; a patch with no light (mean or deviation
+// under 1e-6) becomes 0.
+void NormalizeTexturePatch(float* patch, int n, const std::string& mode);
+// The same for every row of an N × n matrix (a copy).
+Eigen::MatrixXf NormalizeTexturePatches(const Eigen::MatrixXf& patches, const std::string& mode);
 
 // The trained cascade: plain data, so it can be serialised member by member.
 // K = options.num_ferns, F = options.fern_depth, D = dimensions, n = patch_pixels.

@@ -36,6 +36,7 @@ void TrainingOptions::VisitFields(OptionVisitor& v) {
   baseline.VisitFields(v);
   v.Field("training_lights", training_lights);
   v.Field("max_actors", max_actors);
+  v.Field("training_targets", training_targets);
   v.Field("validation_band_mm", validation_band_mm);
 }
 
@@ -48,6 +49,8 @@ void TrainingOptions::Check() const {
   pca.Check();
   ferns.Check();
   baseline.Check();
+  Require(training_targets == "extracted" || training_targets == "truth",
+          fmt::format("TrainingOptions.training_targets = '{}': expected extracted or truth", training_targets));
   Require(!training_lights.empty(), "TrainingOptions.training_lights must be \"all\", \"first\" or light names");
   CheckGe("TrainingOptions", "max_actors", max_actors, 0);
   CheckGe("TrainingOptions", "validation_band_mm", validation_band_mm, 0.0);
@@ -328,6 +331,12 @@ TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const
       sum.timing.Add("  M_0^j and normals", detail.seconds_aligned);
       sum.timing.Add("  rays (Embree)", detail.seconds_rays);
       D[j] = detail.displacement;
+      if (options.training_targets == "truth") {
+        Require(!scan.truth_displacement.empty() && !neutral_truth.empty(),
+                fmt::format("{}: training_targets = truth needs the scan set's ground truth (a studio scan set)",
+                            names[j]));
+        D[j] = ReadTruth(scan.truth_displacement, R) - neutral_truth;
+      }
       if (!scan.truth_displacement.empty() && !neutral_truth.empty()) {
         // D^j is relative to M_0^j, which carries the neutral's own detail (static
         // lines), so its ground truth is the expression displacement minus the
@@ -475,7 +484,9 @@ DetailModel TrainDetailModelFromPairs(const TrainingPairs& pairs, const Training
   TrainingSummary& sum = summary ? *summary : local;
   const bool pictures = !outputs.report_dir.empty();
   if (pictures) fs::create_directories(outputs.report_dir);
-  const Eigen::MatrixXf& T = pairs.texture;
+  // The features' input (FernOptions::fern_texture_normalization; capture applies
+  // the same in DetailModel::RegressBatch).
+  const Eigen::MatrixXf T = NormalizeTexturePatches(pairs.texture, options.ferns.fern_texture_normalization);
   const Eigen::MatrixXf& Dp = pairs.displacement;
   const int total_pairs = static_cast<int>(T.rows());
   const int n = options.patch.patch_size * options.patch.patch_size;
@@ -635,6 +646,28 @@ TrainingPairs ReadTrainingPairs(const fs::path& path) {
           fmt::format("{}: texture ({}×{}) and displacement ({}×{}) patches differ in shape", what, p.texture.rows(),
                       p.texture.cols(), p.displacement.rows(), p.displacement.cols()));
   return p;
+}
+
+TrainingPairs ReadTrainingPairs(const std::vector<fs::path>& paths) {
+  Require(!paths.empty(), "ReadTrainingPairs: no pair files given");
+  TrainingPairs all = ReadTrainingPairs(paths.front());
+  for (size_t k = 1; k < paths.size(); ++k) {
+    const TrainingPairs p = ReadTrainingPairs(paths[k]);
+    Require(p.options_json == all.options_json && p.texture.cols() == all.texture.cols(),
+            fmt::format("{}: extracted with other options than {} (pair files can be joined only when their "
+                        "extraction agrees)",
+                        paths[k].string(), paths.front().string()));
+    const Eigen::Index n = all.texture.rows();
+    all.texture.conservativeResize(n + p.texture.rows(), Eigen::NoChange);
+    all.texture.bottomRows(p.texture.rows()) = p.texture;
+    all.displacement.conservativeResize(n + p.displacement.rows(), Eigen::NoChange);
+    all.displacement.bottomRows(p.displacement.rows()) = p.displacement;
+    all.scan_set += ", " + p.scan_set;
+    all.actors += p.actors;
+    all.scans += p.scans;
+    all.seconds += p.seconds;
+  }
+  return all;
 }
 
 }  // namespace crease

@@ -52,6 +52,11 @@ struct TrainingOptions {
   std::string training_lights = "all";
   // Use only the first N actors of the set (0 = all), for training-size studies.
   int max_actors = 0;
+  // The regression targets d_i (issue 17's rung R0b; not in the paper): "extracted"
+  // (Sec. 4.1's D^j, the method) or "truth" (a studio scan set's ground-truth
+  // expression displacement minus the neutral's: the wrinkle layer alone, to
+  // separate what extraction contributes from what appearance allows).
+  std::string training_targets = "extracted";
   // Validation against ground truth also in the wrinkle band: both maps minus
   // their Gaussian blur of this σ (mm on the face), which removes the broad
   // medium-frequency expression shape that D^j legitimately holds (the part of
@@ -151,5 +156,8 @@ TrainingOptions OptionsForPairs(const TrainingPairs& pairs, const std::string& w
 // seconds}, arrays texture and displacement (f32, N × w², row-major).
 void WriteTrainingPairs(const std::filesystem::path& path, const TrainingPairs& pairs);
 TrainingPairs ReadTrainingPairs(const std::filesystem::path& path);
+// Several pair files as one set (e.g. all actors but one, for a leave-one-actor-out
+// test); their extraction options must agree. Errors name the file that differs.
+TrainingPairs ReadTrainingPairs(const std::vector<std::filesystem::path>& paths);
 
 }  // namespace crease
