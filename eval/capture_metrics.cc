@@ -41,6 +41,7 @@ void CaptureEvalOptions::VisitFields(OptionVisitor& v) {
   v.Field("surface_every", surface_every);
   v.Field("band_mm", band_mm);
   v.Field("detail_truth", detail_truth);
+  v.Field("truth_maps_dir", truth_maps_dir);
   v.Field("wrinkle_regions", wrinkle_regions);
   v.Field("surface_max_distance_mm", surface_max_distance_mm);
   v.Field("surface_mesh_resolution", surface_mesh_resolution);
@@ -719,6 +720,10 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       const cv::Mat layer = ReadMap(TruthMapPath(dataset, info, index), R, /*resample=*/true);
       const cv::Mat G = detail_truth ? Resampled(detail_truth->Detail(ExpressionVector(truth_rig, truth.expression)), R)
                                      : layer;
+      if (!options.truth_maps_dir.empty()) {
+        fs::create_directories(options.truth_maps_dir);
+        WriteImage(fs::path(options.truth_maps_dir) / fmt::format("{:06d}.exr", index), G);
+      }
       e.has_displacement = true;
       e.d_face = CompareMaps(D, G, coverage);
       e.d_wrinkle = CompareMaps(D, G, wrinkle_mask);
@@ -735,9 +740,8 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
           e.d_offset_mm = shift * mm_per_texel;  // +: D^t's lines lie higher (v grows downwards)
         }
       }
-      if (detail_truth) {
-        const cv::Mat Lb = WrinkleBand(
-            Resampled(detail_truth->Wrinkles(ExpressionVector(truth_rig, truth.expression)), R), band_mask);
+      if (detail_truth) {  // the dataset's wrinkle layer, static lines included (the truth of crease ≤ 0.3)
+        const cv::Mat Lb = WrinkleBand(layer, band_mask);
         if (CompareMaps(Db, Lb, wrinkle_mask).reference_rms_mm >= options.active_reference_rms_mm) {
           ++s.layer_active_frames;
           pooled_layer_band.Add(Db, Lb, wrinkle_mask);
@@ -1049,7 +1053,8 @@ std::string CaptureEvalSummary::ToMarkdown() const {
     for (const auto& [name, c] : {std::pair<const char*, const MapComparison&>{"face", d_face},
                                   {"wrinkle regions", d_wrinkle},
                                   {"wrinkle regions, wrinkle band", d_wrinkle_band},
-                                  {"the wrinkle layer alone: wrinkle regions, wrinkle band", d_layer_band}}) {
+                                  {"the wrinkle layer alone (static lines included): wrinkle regions, band",
+                                   d_layer_band}}) {
       if (c.texels == 0) continue;
       o << fmt::format("| {} | {:.4f} | {:.3f} | {:.2f} | {:.4f} |\n", name, c.rmse_mm, c.correlation, Amp(c),
                        c.reference_rms_mm);

@@ -56,6 +56,9 @@ struct CaptureEvalOptions {
   // expression displacement maps (the studio's wrinkle lines alone, the definition
   // of crease ≤ 0.3). The wrinkle layer alone is reported beside either.
   std::string detail_truth = "extraction";
+  // When set, the truth D^t is scored against is written here per frame
+  // (NNNNNN.exr, mm, CV_32F, the capture's map resolution), to look at beside D^t.
+  std::string truth_maps_dir;
   // The regions of the wrinkle metrics (rig region masks).
   std::vector<std::string> wrinkle_regions = {"forehead", "glabella", "left_eye", "right_eye", "left_cheek",
                                               "right_cheek"};
@@ -156,8 +159,9 @@ struct CaptureEvalSummary {
   // correlation or amplitude ratio of a frame without wrinkles means nothing).
   int active_frames = 0;
   MapComparison d_face, d_wrinkle, d_wrinkle_band;
-  // D^t's wrinkle band against the wrinkle layer's alone (the studio's lines, without
-  // the coarse band), wrinkle regions, frames where that layer is active.
+  // D^t's wrinkle band against the dataset's wrinkle layer alone (the studio's lines,
+  // static ones included, without the coarse band: the truth of crease ≤ 0.3),
+  // wrinkle regions, frames where that layer is active.
   MapComparison d_layer_band;
   int layer_active_frames = 0;
   std::string detail_truth;  // the truth used ("extraction" or "wrinkle-layer")
