@@ -250,7 +250,13 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
     json actors = json::array();
     Progress progress("scanning", static_cast<int64_t>(actor_seeds.size() * expressions.size()));
     for (size_t a = 0; a < actor_seeds.size(); ++a) {
-      const Actor actor = GenerateActor(rig, actor_seeds[a], actor_options);
+      ActorOptions ao = actor_options;
+      if (options.stratify_ages) {
+        const double span = (actor_options.age_max - actor_options.age_min) / static_cast<double>(actor_seeds.size());
+        ao.age_min = actor_options.age_min + span * static_cast<double>(a);
+        ao.age_max = ao.age_min + span;
+      }
+      const Actor actor = GenerateActor(rig, actor_seeds[a], ao);
       const Studio studio(rig, actor, options.studio);
       const fs::path adir = dir / fmt::format("actor_{:03d}", a);
       fs::create_directories(adir);

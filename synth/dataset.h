@@ -90,10 +90,17 @@ struct ScanSetOptions {
   // Expressions per scan: "name=w,name=w"; the defaults show the main wrinkles.
   std::vector<std::string> expressions = {"browInnerUp=1,browOuterUp=1", "browDown=1",
                                           "mouthSmile=1,cheekSquint=0.8,eyeSquint=0.7", "noseSneer=1"};
+  // Actor a of n draws its age from the a-th of n equal parts of [age_min, age_max]
+  // (ActorOptions), so a set spans unlined to deeply lined faces as the paper's
+  // several actors do, instead of leaving it to chance (the quickstart's seeds drew
+  // three nearly unlined actors of four: ages 0.04, 0.09, 0.65, 0.06). false: each
+  // actor draws from the whole range.
+  bool stratify_ages = true;
   bool overwrite = false;
 };
 
-// Actors are generated from `actor_seeds` with `actor_options`.
+// Actors are generated from `actor_seeds` with `actor_options` (ages stratified,
+// ScanSetOptions::stratify_ages).
 DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& actor_seeds,
                            const ActorOptions& actor_options, const ScanSetOptions& options,
                            const std::filesystem::path& out);

@@ -146,6 +146,26 @@ TEST(Studio, ScanSetHasMeshesCalibratedImagesAndMaps) {
   EXPECT_GT((c0.CentreInHead() - c1.CentreInHead()).norm(), 100.0);
 }
 
+// A scan set spans ages: actor a of n draws from the a-th of n parts of the range.
+TEST(Studio, ScanSetStratifiesActorAges) {
+  const fs::path dir = TestDir();
+  ScanSetOptions o;
+  o.studio.width = 48;
+  o.studio.height = 36;
+  o.cameras = 1;
+  o.expressions = {"browInnerUp=1"};
+  ActorOptions ao = SmallActor();
+  ao.age_min = 0.2;
+  ao.age_max = 1.0;
+  WriteScanSet(SampleRig(), {5, 6}, ao, o, dir / "scans");
+  const double young = ReadActor(dir / "scans" / "actor_000" / "actor.json").style.age;
+  const double old = ReadActor(dir / "scans" / "actor_001" / "actor.json").style.age;
+  EXPECT_GE(young, 0.2);
+  EXPECT_LE(young, 0.6);
+  EXPECT_GE(old, 0.6);
+  EXPECT_LE(old, 1.0);
+}
+
 // Golden image of the procedural rig's neutral face (one actor) under a directional
 // light; regenerate with CREASE_UPDATE_GOLDEN=1 after an intended change, and look at it.
 TEST(Studio, NeutralFaceGoldenImage) {

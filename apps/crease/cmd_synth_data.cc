@@ -205,6 +205,10 @@ void AddSynthDatasetCommands(CLI::App& app) {
     cmd->add_option("--size", size, "Image size WIDTHxHEIGHT (default 640x480)");
     cmd->add_option("--samples", samples, "Anti-aliasing samples per pixel axis")->capture_default_str();
     cmd->add_flag("--overwrite", overwrite, "Replace an existing output folder");
+    static bool any_age = false;
+    cmd->add_flag("--no-stratify-ages", any_age,
+                  "Each actor draws its age from the whole [age_min, age_max] (default: actor a of n from the a-th "
+                  "of n equal parts, so the set spans unlined to lined faces)");
     cmd->add_option("--out,-o", out, "Output folder")->required();
     static std::vector<std::string> sets;
     cmd->add_option("--set", sets, "Actor option KEY=VALUE (repeatable; synth/actor.h ActorOptions), e.g. "
@@ -220,6 +224,7 @@ void AddSynthDatasetCommands(CLI::App& app) {
       o.light_rigs = SplitComma(lights);
       if (!expressions.empty()) o.expressions = expressions;
       o.overwrite = overwrite;
+      o.stratify_ages = !any_age;
       Require(actors >= 1, "--actors must be >= 1");
       std::vector<uint64_t> seeds;
       for (int a = 0; a < actors; ++a) seeds.push_back(seed + static_cast<uint64_t>(a));
