@@ -445,16 +445,21 @@ ActorModel::ActorModel(const FaceRig& rig, const Actor& actor) : rig_(PersonalRi
   so.smoothing_mm = actor_.options.strain_smoothing_mm;
   strain_ = std::make_unique<StrainField>(rig_, so);
   neutral_metric_ = strain_->MetricMap(rig_.EvaluatePositions(actor_.identity, {}));
+  skin_ = BuildSkinMaps(rig_, anchors_, actor_.skin, R);
+  // No wrinkle under the painted scalp hair (its lines would be in the truth but in
+  // no image): the families' region weights fade out with the hair.
+  cv::Mat skin_weight;
+  if (!skin_.hair.empty()) skin_weight = 1.0f - skin_.hair;
   std::vector<cv::Mat> weights;
   for (auto f : {WrinkleFamily::kForehead, WrinkleFamily::kGlabella, WrinkleFamily::kCrowsFeet,
                  WrinkleFamily::kNasolabial, WrinkleFamily::kUnderEye, WrinkleFamily::kBunny}) {
     weights.push_back(SoftRegionWeight(rig_, WrinkleFamilyRegions(f), R, 2.0, anchors_.mm_per_uv));
+    if (!skin_weight.empty()) weights.back() = weights.back().mul(skin_weight);
   }
   wrinkles_ = std::make_unique<WrinkleField>(actor_.wrinkles, R, anchors_.mm_per_uv, weights, neutral_metric_);
   static_ = BuildStaticShapeMap(anchors_, actor_.static_shape, R);
   static_ = static_.mul(ChartRimFade(rig_, R, anchors_.mm_per_uv, kStaticShapeRimFadeMm));
   meso_ = BuildMesoscopicMap(rig_, anchors_, actor_.mesoscopic, R);
-  skin_ = BuildSkinMaps(rig_, anchors_, actor_.skin, R);
 }
 
 cv::Mat ActorModel::ExpressionDisplacement(const MatX3d& V) const {

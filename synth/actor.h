@@ -32,6 +32,9 @@
 //     interpolated coarse normal (see synth/hires_surface.h), not free-form
 //     geometry; no self-intersections are prevented.
 //  3. Pores and wrinkles are fixed in UV; they do not slide with the skin.
+//  4. Wrinkles fade out under the scalp hair the studio paints on a chart without a
+//     hair part (ICT-FaceKit), and forehead lines are laid out below its hairline:
+//     lines under the hair would be in the truth but in no image.
 #pragma once
 
 #include <cstdint>

@@ -250,7 +250,7 @@ cv::Mat BuildMesoscopicMap(const FaceRig& rig, const FaceAnchors& anchors, const
 
 double ScalpHairline::Weight(const Eigen::Vector3d& p) const {
   // (azimuth °, height above the eye line mm), piecewise linear in |θ|.
-  static constexpr double kProfile[][2] = {{0, 62}, {20, 60}, {60, 45}, {110, 45}, {130, -45}, {180, -45}};
+  static constexpr double kProfile[][2] = {{0, kFrontHeightMm}, {20, 60}, {60, 45}, {110, 45}, {130, -45}, {180, -45}};
   const double theta = std::abs(std::atan2(p.x(), p.z() - ear_z)) * 180.0 / std::numbers::pi;
   double h = kProfile[0][1];
   for (size_t k = 0; k + 1 < std::size(kProfile); ++k) {
@@ -260,6 +260,10 @@ double ScalpHairline::Weight(const Eigen::Vector3d& p) const {
     }
   }
   return SmoothStep(-1.5, 1.5, p.y() - eye_y - h);
+}
+
+bool PaintsScalpHair(const FaceRig& rig) {
+  return rig.PartIndex("hair") < 0 && rig.LandmarkIndex("ibug_68") >= 0;
 }
 
 ScalpHairline ScalpHairlineOf(const FaceRig& rig) {
@@ -356,7 +360,7 @@ SkinMaps BuildSkinMaps(const FaceRig& rig, const FaceAnchors& a, const SkinParam
   }
 
   SkinMaps maps;
-  const bool paint_hair = rig.PartIndex("hair") < 0 && rig.LandmarkIndex("ibug_68") >= 0;
+  const bool paint_hair = PaintsScalpHair(rig);
   maps.hair = paint_hair ? ScalpHairMap(rig, size) : cv::Mat(size, size, CV_32F, cv::Scalar(0));
   maps.albedo.create(size, size, CV_32FC3);
   maps.specular.create(size, size, CV_32F);

@@ -74,6 +74,7 @@ struct SkinMaps {
 // receding to 45 mm at the temples (60°) and over the ears (to 110°), down to the
 // nape (−45 mm) behind them (≥ 130°); linear in between, soft over ±1.5 mm.
 struct ScalpHairline {
+  static constexpr double kFrontHeightMm = 62.0;  // the hairline above the eye line at the front
   double eye_y = 0.0;  // the eye line's height, mm
   double ear_z = 0.0;  // the ears' depth, mm
   // Hair weight in [0, 1] of a neutral head-frame point.
@@ -81,6 +82,9 @@ struct ScalpHairline {
 };
 // From the rig's 68 iBUG landmarks (throws Error naming the rig without them).
 ScalpHairline ScalpHairlineOf(const FaceRig& rig);
+// True when the studio paints scalp hair on the rig's chart: the rig has the 68
+// iBUG landmarks and no hair part of its own.
+bool PaintsScalpHair(const FaceRig& rig);
 // The skin maps in the rig's UV layout. A rig with the 68 iBUG landmarks and
 // without a part named "hair" (a hair cap of its own, as the procedural head's)
 // gets scalp hair painted above its ScalpHairline (SkinMaps::hair).

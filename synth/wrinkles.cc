@@ -13,6 +13,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/error.h"
+#include "synth/skin.h"
 
 namespace crease {
 namespace {
@@ -178,6 +179,18 @@ FaceAnchors ComputeFaceAnchors(const FaceRig& rig) {
   a.forehead_height_mm = forehead.valid
                              ? ((forehead.centroid + a.up * forehead.hi_u) - brow_mid).dot(a.up) * a.mm_per_uv
                              : 0.9 * iod_mm;
+  if (PaintsScalpHair(rig)) {
+    // The forehead ends at the painted hairline (synth/skin.h), not at the chart's
+    // top, which runs on over the scalp (ICT-FaceKit): lines above it would lie
+    // under the hair, in the truth but in no image.
+    const ScalpHairline hairline = ScalpHairlineOf(rig);
+    double brow_y = 0.0;
+    for (int i = 18; i <= 27; ++i) {
+      brow_y += rig.neutral.V(rig.landmarks[rig.LandmarkIndex(fmt::format("ibug_{}", i))].vertex, 1) / 10.0;
+    }
+    a.forehead_height_mm =
+        std::min(a.forehead_height_mm, ScalpHairline::kFrontHeightMm - (brow_y - hairline.eye_y));
+  }
   return a;
 }
 

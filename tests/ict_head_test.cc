@@ -8,6 +8,8 @@
 #include <filesystem>
 
 #include "eval/realism_check.h"
+#include "synth/dataset.h"
+#include "synth/actor.h"
 #include "tests/test_util.h"
 
 namespace crease {
@@ -97,6 +99,35 @@ TEST(IctHead, StudioHeadHasOpaqueEyesAndNoLashCards) {
 
 // Issue 15's realism bounds on a small set: dlib finds every face under front and
 // studio light, its 68 landmarks within 0.07 inter-ocular distances of the truth.
+// Forehead lines end below the painted hairline: none of a lined actor's brow-raise
+// wrinkle depth lies under the scalp hair, where no image could show it.
+TEST(IctHead, ForeheadLinesStayBelowThePaintedHairline) {
+  const FaceRig& rig = StudioHead();
+  ActorOptions o;
+  o.resolution = 256;
+  o.surface_min_vertices = 0;
+  o.age_min = o.age_max = 1.0;
+  const Eigen::VectorXd raise = ParseExpressionSpec("browInnerUp=1,browOuterUp=1", rig);
+  for (uint64_t seed : {3u, 4u, 5u}) {
+    const ActorModel model(rig, GenerateActor(rig, seed, o));
+    const cv::Mat d = model.Frame(raise, false).expression_displacement;
+    const cv::Mat& hair = model.skin().hair;
+    ASSERT_EQ(hair.size(), d.size());
+    double under_hair = 0, on_skin = 0;
+    for (int j = 0; j < d.rows; ++j) {
+      for (int i = 0; i < d.cols; ++i) {
+        const double v = std::abs(d.at<float>(j, i));
+        const float h = hair.at<float>(j, i);
+        if (h > 0.05f && h < 0.95f) continue;  // the soft hairline itself
+        double& m = h >= 0.95f ? under_hair : on_skin;
+        m = std::max(m, v);
+      }
+    }
+    EXPECT_GT(on_skin, 0.2) << "seed " << seed;       // the lines are there, on the forehead
+    EXPECT_LT(under_hair, 0.05) << "seed " << seed;   // mm: nothing under the hair
+  }
+}
+
 TEST(IctHead, DlibFindsStudioFacesWithinTheRealismBounds) {
   RealismCheckOptions o;
   o.actors = 2;
