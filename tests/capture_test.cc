@@ -31,6 +31,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <string>
@@ -230,6 +231,25 @@ struct Moments {
     return cov / std::sqrt((sxx / n - sx * sx / n / n) * (syy / n - sy * sy / n / n));
   }
 };
+
+// Rung R1's wrinkle texture: a groove of the displacement is a dark line, flat skin
+// mid-grey, NaN neutral; resampled to the map size and clamped to [0, 1].
+TEST(Capture, WrinkleTextureFromDisplacementDrawsGroovesDark) {
+  cv::Mat d(64, 64, CV_32F, cv::Scalar(0.0f));
+  d.row(20).setTo(-0.3f);
+  d.row(21).setTo(-0.3f);
+  d.at<float>(40, 40) = std::numeric_limits<float>::quiet_NaN();
+  d.at<float>(50, 50) = 5.0f;
+  const cv::Mat same = WrinkleTextureFromDisplacement(d, 64);
+  EXPECT_NEAR(same.at<float>(20, 10), 0.35f, 1e-6);
+  EXPECT_NEAR(same.at<float>(5, 10), 0.5f, 1e-6);
+  EXPECT_NEAR(same.at<float>(40, 40), 0.5f, 1e-6);
+  EXPECT_NEAR(same.at<float>(50, 50), 1.0f, 1e-6);
+  const cv::Mat half = WrinkleTextureFromDisplacement(d, 32);
+  ASSERT_EQ(half.rows, 32);
+  EXPECT_NEAR(half.at<float>(10, 5), 0.35f, 1e-5);  // rows 20–21 average into row 10
+  EXPECT_THROW(WrinkleTextureFromDisplacement(cv::Mat(4, 8, CV_32F), 4), Error);
+}
 
 TEST(Capture, EndToEndOnAStudioSequence) {
   const auto t_start = Clock::now();

@@ -1,12 +1,15 @@
 #include "pipeline/capture/capture.h"
 
 #include <chrono>
+#include <filesystem>
 #include <utility>
 
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "core/image_io.h"
 #include "core/options.h"
 #include "pipeline/capture/landmarks.h"
 #include "pipeline/training/detail_extraction.h"
@@ -31,6 +34,19 @@ MatX3d CameraVertices(const FaceRig& rig, const Eigen::VectorXd& identity, const
 
 }  // namespace
 
+cv::Mat WrinkleTextureFromDisplacement(const cv::Mat& displacement, int R) {
+  Require(!displacement.empty() && displacement.rows == displacement.cols,
+          fmt::format("wrinkle texture: the displacement map is {}×{}, expected a square map", displacement.cols,
+                      displacement.rows));
+  cv::Mat d;
+  displacement.convertTo(d, CV_32F);
+  if (d.rows != R) cv::resize(d, d, cv::Size(R, R), 0, 0, d.rows > R ? cv::INTER_AREA : cv::INTER_LINEAR);
+  cv::Mat t = 0.5 + 0.5 * d;
+  cv::patchNaNs(t, 0.5);
+  cv::min(cv::max(t, 0.0), 1.0, t);
+  return t;
+}
+
 void CaptureOptions::VisitFields(OptionVisitor& v) {
   tracker.VisitFields(v);
   refinement.VisitFields(v);
@@ -42,6 +58,7 @@ void CaptureOptions::VisitFields(OptionVisitor& v) {
   v.Field("regress_detail", regress_detail);
   v.Field("mesoscopic_detail", mesoscopic_detail);
   v.Field("build_hifi_mesh", build_hifi_mesh);
+  v.Field("wrinkle_map_from_maps", wrinkle_map_from_maps);
 }
 
 void CaptureOptions::Check() const {
@@ -141,7 +158,17 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
   }
   if (out.has_mesh) {
     const auto t0 = std::chrono::steady_clock::now();
-    detail_->AddWrinkleFrame(out.texture.gray, out.texture.seen);
+    if (options_.wrinkle_map_from_maps.empty()) {
+      detail_->AddWrinkleFrame(out.texture.gray, out.texture.seen);
+    } else {
+      const std::filesystem::path p =
+          std::filesystem::path(options_.wrinkle_map_from_maps) / fmt::format("{:06d}.exr", out.frame);
+      Require(std::filesystem::is_regular_file(p),
+              fmt::format("{}: missing (wrinkle_map_from_maps needs a map per wrinkle frame)", p.string()));
+      cv::Mat d = ReadImage(p, /*srgb=*/false);
+      if (d.channels() > 1) cv::extractChannel(d, d, 0);
+      detail_->AddWrinkleFrame(WrinkleTextureFromDisplacement(d, map_resolution_), out.texture.seen);
+    }
     out.timing.wrinkle_map_ms = MsSince(t0);
   }
   pending_.push_back(std::move(out));

@@ -54,6 +54,11 @@ namespace crease {
 
 class OptionVisitor;
 
+// A displacement map (CV_32F, mm, positive outwards) as the gray texture a groove
+// would give under light from the front: T = 0.5 + 0.5 · D / 1 mm, clamped to
+// [0, 1], resampled to R×R (CaptureOptions::wrinkle_map_from_maps).
+cv::Mat WrinkleTextureFromDisplacement(const cv::Mat& displacement, int R);
+
 struct CaptureOptions {
   TrackerOptions tracker;            // the global tracker (Sec. 5, DDE in the paper)
   FlowRefinementOptions refinement;  // Sec. 5.1
@@ -70,6 +75,13 @@ struct CaptureOptions {
   // per-frame figures, as the paper's GPU displacement mapping does). Either way the
   // caller gets H^t of any completed frame from HifiMesh().
   bool build_hifi_mesh = true;
+  // Issue 17's ladder rung R1 (not in the paper): a folder of per-frame displacement
+  // maps NNNNNN.exr (mm, the rig's UV layout; e.g. the truth written by `crease eval
+  // --set truth_maps_dir=…`) that the wrinkle map (Sec. 5.2) is built from instead
+  // of the first frames' textures, each drawn as a texture lit from the front
+  // (WrinkleTextureFromDisplacement): the patches then sit where the lines truly
+  // are, and only the regression from T^t is real. Empty = the paper's.
+  std::string wrinkle_map_from_maps;
 
   // All fields of all stages, flattened (keys are unique).
   void VisitFields(OptionVisitor& v);
