@@ -1,6 +1,7 @@
 #include "eval/experiment.h"
 
-#include <spawn.h>
+#include <signal.h>
+#include <sys/prctl.h>
 #include <sys/utsname.h>
 #include <sys/wait.h>
 #include <fcntl.h>
@@ -615,16 +616,27 @@ StageExecutor SubprocessExecutor(const fs::path& program) {
     std::vector<char*> cargs;
     for (auto& a : args) cargs.push_back(a.data());
     cargs.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
+    if (access(cargs[0], X_OK) != 0) {
+      throw Error(fmt::format("cannot start {}: {}", program.string(), std::strerror(errno)));
+    }
     const std::string log_path = log.string();
-    posix_spawn_file_actions_addopen(&actions, 1, log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&actions, 1, 2);
-    posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
-    pid_t pid = 0;
-    const int rc = posix_spawn(&pid, cargs[0], &actions, nullptr, cargs.data(), environ);
-    posix_spawn_file_actions_destroy(&actions);
-    if (rc != 0) throw Error(fmt::format("cannot start {}: {}", program.string(), std::strerror(rc)));
+    // fork + exec rather than posix_spawn: the child asks to die with its parent
+    // (prctl) before exec. Only async-signal-safe calls run between them.
+    const pid_t parent = getpid();
+    const int log_fd = open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (log_fd < 0) throw Error(fmt::format("{}: cannot write the stage log: {}", log_path, std::strerror(errno)));
+    const pid_t pid = fork();
+    if (pid == 0) {
+      prctl(PR_SET_PDEATHSIG, SIGTERM);
+      if (getppid() != parent) _exit(127);  // the runner died before prctl took effect
+      const int null_fd = open("/dev/null", O_RDONLY);
+      if (null_fd < 0 || dup2(null_fd, 0) < 0 || dup2(log_fd, 1) < 0 || dup2(log_fd, 2) < 0) _exit(127);
+      execv(cargs[0], cargs.data());
+      _exit(127);
+    }
+    const int fork_errno = errno;
+    close(log_fd);
+    if (pid < 0) throw Error(fmt::format("cannot start {}: {}", program.string(), std::strerror(fork_errno)));
     int status = 0;
     while (waitpid(pid, &status, 0) < 0) {
       if (errno != EINTR) throw Error(fmt::format("waiting for {}: {}", program.string(), std::strerror(errno)));

@@ -138,7 +138,10 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const std::
                                            const std::string& program_version);
 
 // Runs `argv` (crease arguments) with stdout and stderr to `log`; returns the exit
-// status (0 = success). The default spawns the crease program `program`.
+// status (0 = success). The default spawns the crease program `program`. The stage
+// process dies with the runner (Linux: SIGTERM when its parent exits, even by
+// SIGKILL), so a killed `crease experiment run` leaves no stage writing into the
+// cache that a rerun would start again beside it.
 using StageExecutor = std::function<int(const std::vector<std::string>& argv, const std::filesystem::path& log)>;
 StageExecutor SubprocessExecutor(const std::filesystem::path& program);
 

@@ -8,9 +8,14 @@
 #include <filesystem>
 #include <fstream>
 #include <algorithm>
+#include <chrono>
 #include <mutex>
 #include <set>
 #include <thread>
+
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include "core/error.h"
 #include "core/json_io.h"
@@ -91,6 +96,46 @@ int FakeExecute(const std::vector<std::string>& argv, const fs::path& log) {
                        {"per_frame", json::array({json{{"frame", 0}, {"refined_px", 1.0}}, json{{"frame", 1}, {"refined_px", nullptr}}})}});
   }
   return 0;
+}
+
+// A stage process dies with its runner, even when the runner is killed with
+// SIGKILL (issue 19: a killed `crease experiment run` left its stage writing into
+// the cache).
+TEST(Experiment, AStageDiesWithItsRunner) {
+  const std::filesystem::path dir =
+      std::filesystem::path(::testing::TempDir()) / ("stage_dies_" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string pid_file = (dir / "pid").string();
+  const pid_t runner = fork();
+  ASSERT_GE(runner, 0);
+  if (runner == 0) {  // the runner: waits on a stage that would sleep for a minute
+    SubprocessExecutor("/bin/sh")({"-c", "echo $$ > " + pid_file + ".tmp && mv " + pid_file + ".tmp " + pid_file +
+                                             " && exec sleep 60"},
+                                  dir / "stage.log");
+    _exit(0);
+  }
+  pid_t stage = 0;
+  for (int i = 0; i < 500 && stage == 0; ++i) {
+    std::ifstream in(pid_file);
+    if (!(in >> stage)) stage = 0;
+    if (stage == 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ASSERT_GT(stage, 0) << "the stage did not start";
+  kill(runner, SIGKILL);
+  waitpid(runner, nullptr, 0);
+  // Gone, or a zombie waiting for init to reap it, within 5 s.
+  auto alive = [&] {
+    std::ifstream stat("/proc/" + std::to_string(stage) + "/stat");
+    std::string pid, comm, state;
+    if (!(stat >> pid >> comm >> state)) return false;
+    return state != "Z" && state != "X";
+  };
+  for (int i = 0; i < 500 && alive(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const bool survived = alive();
+  if (survived) kill(stage, SIGKILL);
+  EXPECT_FALSE(survived) << "the stage outlived its runner";
+  EXPECT_THROW(SubprocessExecutor(dir / "no-such-program")({}, dir / "x.log"), Error);
+  std::filesystem::remove_all(dir);
 }
 
 TEST(Experiment, ParsesAConfigAndExpandsAListSweepOverSeeds) {
