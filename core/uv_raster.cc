@@ -1,6 +1,7 @@
 #include "core/uv_raster.h"
 
 #include <fmt/format.h>
+#include <opencv2/imgproc.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -290,6 +291,13 @@ cv::Mat CoverageMask(const UvRaster& raster) {
     }
   }
   return mask;
+}
+
+cv::Mat ResampleSquareMap(const cv::Mat& map, int R) {
+  if (map.rows != map.cols || map.rows == R || map.rows == 0) return map;
+  cv::Mat r;
+  cv::resize(map, r, cv::Size(R, R), 0, 0, map.rows > R ? cv::INTER_AREA : cv::INTER_LINEAR);
+  return r;
 }
 
 }  // namespace crease

@@ -68,4 +68,9 @@ cv::Mat InterpolateToUv(const UvRaster& raster, const TriMesh& mesh, const Eigen
 // CV_8U map: 255 where covered, 0 elsewhere.
 cv::Mat CoverageMask(const UvRaster& raster);
 
+// A square map of the UV layout at another resolution resampled to R×R (area
+// averaging down, bilinear up); a map that is already R×R, empty or not square is
+// returned as it is (shared data).
+cv::Mat ResampleSquareMap(const cv::Mat& map, int R);
+
 }  // namespace crease

@@ -12,7 +12,6 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/video/tracking.hpp>
 
 #include "core/camera.h"
 #include "core/error.h"
@@ -59,8 +58,7 @@ void CaptureEvalOptions::Check() const {
   const char* o = "CaptureEvalOptions";
   CheckGe(o, "surface_every", surface_every, 0);
   CheckGt(o, "band_mm", band_mm, 0.0);
-  Require(detail_truth == "extraction" || detail_truth == "wrinkle-layer",
-          fmt::format("{}.detail_truth = '{}': expected extraction or wrinkle-layer", o, detail_truth));
+  CheckOneOf(o, "detail_truth", detail_truth, {"extraction", "wrinkle-layer"});
   CheckGt(o, "surface_max_distance_mm", surface_max_distance_mm, 0.0);
   CheckGe(o, "surface_mesh_resolution", surface_mesh_resolution, 8);
   CheckGe(o, "offset_search_mm", offset_search_mm, 0.0);
@@ -95,20 +93,12 @@ double MeanDistance(const MatX3d& a, const MatX3d& b, const std::vector<int>& id
 
 // A float map of R×R texels. `resample`: a square map of another size is resampled
 // to R (the studio writes its truth at its own resolution, the model may use another).
-// A square map resampled to R×R (area averaging down, bilinear up); others unchanged.
-cv::Mat Resampled(const cv::Mat& m, int R) {
-  if (m.rows != m.cols || m.rows == R || m.rows == 0) return m;
-  cv::Mat r;
-  cv::resize(m, r, cv::Size(R, R), 0, 0, m.rows > R ? cv::INTER_AREA : cv::INTER_LINEAR);
-  return r;
-}
-
 cv::Mat ReadMap(const fs::path& path, int R, bool resample = false) {
   Require(fs::is_regular_file(path), fmt::format("{}: missing", path.string()));
   cv::Mat m = ReadImage(path, /*srgb=*/false);
   if (m.channels() > 1) cv::extractChannel(m, m, 0);
   if (m.depth() != CV_32F) m.convertTo(m, CV_32F);
-  if (resample) m = Resampled(m, R);
+  if (resample) m = ResampleSquareMap(m, R);
   Require(m.rows == R && m.cols == R,
           fmt::format("{}: the map is {}×{}, expected {}×{}", path.string(), m.cols, m.rows, R, R));
   return m;
@@ -142,12 +132,9 @@ SurfaceError MeasureSurface(const TriMesh& h, const RayCaster& truth, double max
 }
 
 json ComparisonJson(const MapComparison& c) {
-  return {{"texels", c.texels},
-          {"rmse_mm", c.rmse_mm},
-          {"correlation", c.correlation},
-          {"amplitude_ratio", c.reference_rms_mm > 0 ? c.extracted_rms_mm / c.reference_rms_mm : 0.0},
-          {"reference_rms_mm", c.reference_rms_mm},
-          {"extracted_rms_mm", c.extracted_rms_mm}};
+  json j = MapComparisonJson(c);
+  j["amplitude_ratio"] = c.reference_rms_mm > 0 ? c.extracted_rms_mm / c.reference_rms_mm : 0.0;
+  return j;
 }
 
 json SurfaceJson(const SurfaceError& s) {
@@ -425,12 +412,11 @@ class LkFromTruthMeter {
   // defaults for what they lack.
   explicit LkFromTruthMeter(const json& capture_options) {
     const json o = capture_options.is_object() ? capture_options : json::object();
-    const FlowRefinementOptions d;
-    window_ = o.value("lk_window", d.lk_window);
-    levels_ = o.value("lk_pyramid_levels", d.lk_pyramid_levels);
-    iterations_ = o.value("lk_max_iterations", d.lk_max_iterations);
-    epsilon_ = o.value("lk_epsilon_px", d.lk_epsilon_px);
-    min_eigenvalue_ = o.value("lk_min_eigenvalue", d.lk_min_eigenvalue);
+    lk_.lk_window = o.value("lk_window", lk_.lk_window);
+    lk_.lk_pyramid_levels = o.value("lk_pyramid_levels", lk_.lk_pyramid_levels);
+    lk_.lk_max_iterations = o.value("lk_max_iterations", lk_.lk_max_iterations);
+    lk_.lk_epsilon_px = o.value("lk_epsilon_px", lk_.lk_epsilon_px);
+    lk_.lk_min_eigenvalue = o.value("lk_min_eigenvalue", lk_.lk_min_eigenvalue);
   }
   // Frame `index` (8-bit gray) with its truth; `flow_vertex`: the capture's flow points.
   void Add(int index, const cv::Mat& gray8, const FrameTruth& truth, const std::vector<int>& flow_vertex) {
@@ -463,12 +449,7 @@ class LkFromTruthMeter {
       from.emplace_back(static_cast<float>(previous_px_(v, 0)), static_cast<float>(previous_px_(v, 1)));
     }
     if (ids.empty()) return;
-    to = from;
-    std::vector<uint8_t> status;
-    std::vector<float> err;
-    cv::calcOpticalFlowPyrLK(previous_gray_, gray8, from, to, status, err, cv::Size(window_, window_), levels_ - 1,
-                             cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, iterations_, epsilon_),
-                             0, min_eigenvalue_);
+    const std::vector<uint8_t> status = TrackLucasKanade(lk_, previous_gray_, gray8, from, &to, false);
     for (size_t k = 0; k < ids.size(); ++k) {
       if (!status[k]) continue;
       const Eigen::Vector2d m = (truth.vertices.row(ids[k]) - previous_px_.row(ids[k])).transpose();
@@ -480,8 +461,7 @@ class LkFromTruthMeter {
       motion2_ += m.squaredNorm();
     }
   }
-  int window_ = 0, levels_ = 0, iterations_ = 0;
-  double epsilon_ = 0, min_eigenvalue_ = 0;
+  FlowRefinementOptions lk_;  // the capture's LK settings
   int previous_index_ = -2;
   cv::Mat previous_gray_;
   MatX2d previous_px_;
@@ -548,9 +528,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   const FaceRig truth_motion = truth_actor ? PersonalRig(truth_rig, *truth_actor) : truth_rig;
   Eigen::VectorXd known_identity;  // the actor's α, when the tracking rig shares the truth's identity modes
   if (truth_actor && corr.same_uv) {
-    known_identity = truth_actor->identity;
-    known_identity.conservativeResize(rig.num_identity());
-    for (Eigen::Index k = truth_actor->identity.size(); k < known_identity.size(); ++k) known_identity[k] = 0.0;
+    known_identity = ZeroPadded(truth_actor->identity, rig.num_identity());
   }
   const RigPriorFit prior(rig, face_ids, known_identity);
 
@@ -588,6 +566,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     }
     detail_truth = std::make_unique<DetailTruth>(truth_rig, *truth_actor, g);
   }
+  if (!options.truth_maps_dir.empty()) fs::create_directories(options.truth_maps_dir);
   LkFromTruthMeter lk_meter(cap.contains("options") ? cap["options"] : json::object());
   std::vector<char> evaluated(static_cast<size_t>(rig.num_vertices()), 0);  // face_ids as a mask
   for (int i : face_ids) evaluated[i] = 1;
@@ -626,11 +605,10 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
                         rig.num_vertices()));
     ++tracked_count;
     const FrameTruth truth = corr.MapTruth(ReadFrameTruth(dataset, index, truth_rig.num_vertices()));
-    Eigen::VectorXd identity = truth.identity;
-    if (identity.size() != truth_rig.num_identity()) identity.conservativeResize(truth_rig.num_identity());
+    const Eigen::VectorXd identity = TruthIdentity(truth_rig, truth);
+    const Eigen::VectorXd beta = ExpressionVector(truth_rig, truth.expression);
     // The truth at the tracking rig's vertices (head frame of the truth rig, then camera).
-    const MatX3d true_head =
-        corr.Map(truth_motion.EvaluatePositions(identity, ExpressionVector(truth_rig, truth.expression)));
+    const MatX3d true_head = corr.Map(truth_motion.EvaluatePositions(identity, beta));
     const MatX3d true_cam = Transform(truth.cam_from_head, true_head);
     const MatX3d prior_cam =
         Transform(truth.cam_from_head, corr.FromTrackingFrame(prior.Fit(corr.ToTrackingFrame(true_head))));
@@ -718,10 +696,8 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     if (corr.same_uv && fs::is_regular_file(d_path)) {
       D = ReadMap(d_path, R);
       const cv::Mat layer = ReadMap(TruthMapPath(dataset, info, index), R, /*resample=*/true);
-      const cv::Mat G = detail_truth ? Resampled(detail_truth->Detail(ExpressionVector(truth_rig, truth.expression)), R)
-                                     : layer;
+      const cv::Mat G = detail_truth ? ResampleSquareMap(detail_truth->Detail(beta), R) : layer;
       if (!options.truth_maps_dir.empty()) {
-        fs::create_directories(options.truth_maps_dir);
         WriteImage(fs::path(options.truth_maps_dir) / fmt::format("{:06d}.exr", index), G);
       }
       e.has_displacement = true;
@@ -772,7 +748,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
 
     // H^t against the true high-resolution surface (every surface_every-th tracked frame).
     if (actor && (tracked_count - 1) % options.surface_every == 0) {
-      TriMesh truth_hires = actor->Frame(ExpressionVector(truth_rig, truth.expression), true).hires;
+      TriMesh truth_hires = actor->Frame(beta, true).hires;
       truth_hires.V = Transform(truth.cam_from_head, truth_hires.V);
       const RayCaster caster(truth_hires);
       const cv::Mat zero = cv::Mat::zeros(R, R, CV_32F);

@@ -17,24 +17,6 @@
 
 namespace crease {
 
-namespace {
-
-Eigen::VectorXd PaddedIdentity(const FaceRig& rig, const Actor& actor) {
-  Eigen::VectorXd a = Eigen::VectorXd::Zero(rig.num_identity());
-  const Eigen::Index n = std::min<Eigen::Index>(a.size(), actor.identity.size());
-  a.head(n) = actor.identity.head(n);
-  return a;
-}
-
-Eigen::VectorXd Padded(const Eigen::VectorXd& w, int n) {
-  Eigen::VectorXd out = Eigen::VectorXd::Zero(n);
-  const Eigen::Index k = std::min<Eigen::Index>(n, w.size());
-  out.head(k) = w.head(k);
-  return out;
-}
-
-}  // namespace
-
 DetailTruth::DetailTruth(const FaceRig& rig, const Actor& actor, const DetailExtractionOptions& detail)
     : model_(rig, actor), compatible_(MakeRigCompatible(model_.rig(), detail)) {
   const FaceRig& personal = model_.rig();
@@ -48,13 +30,13 @@ DetailTruth::DetailTruth(const FaceRig& rig, const Actor& actor, const DetailExt
 }
 
 cv::Mat DetailTruth::Wrinkles(const Eigen::VectorXd& expression) const {
-  const Eigen::VectorXd w = Padded(expression, model_.rig().num_expressions());
+  const Eigen::VectorXd w = ZeroPadded(expression, model_.rig().num_expressions());
   return model_.Frame(w, false).expression_displacement - neutral_wrinkles_;
 }
 
 cv::Mat DetailTruth::CoarseBand(const Eigen::VectorXd& expression) const {
-  const Eigen::VectorXd w = Padded(expression, compatible_.num_expressions());
-  const TriMesh c = compatible_.Evaluate(PaddedIdentity(compatible_, model_.actor()), w);
+  const Eigen::VectorXd w = ZeroPadded(expression, compatible_.num_expressions());
+  const TriMesh c = compatible_.Evaluate(ZeroPadded(model_.actor().identity, compatible_.num_identity()), w);
   const MatX3d n = VertexNormals(c);
   const Eigen::VectorXd d = delta_ * w;  // 3#V
   Eigen::MatrixXd along(c.num_vertices(), 1);
@@ -102,9 +84,7 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
             fmt::format("{}: the actor's maps are {}×{}; set map_resolution = {}", (sa.folder / "actor.json").string(),
                         R, R, R));
     std::vector<TriMesh> meshes;
-    std::vector<int> order = {sa.neutral};
-    for (int s = 0; s < static_cast<int>(sa.scans.size()); ++s)
-      if (s != sa.neutral) order.push_back(s);
+    const std::vector<int> order = NeutralFirst(sa);
     for (int s : order) meshes.push_back(ReadMesh(sa.scans[s].mesh));
     std::vector<MatX3d> others;
     for (size_t j = 1; j < meshes.size(); ++j) others.push_back(meshes[j].V);
@@ -152,16 +132,17 @@ std::string ExtractionTruthReport::ToTable() const {
 }
 
 std::string ExtractionTruthReport::ToJson() const {
-  auto cmp = [](const MapComparison& c) {
-    return nlohmann::json{{"texels", c.texels}, {"rmse_mm", c.rmse_mm}, {"correlation", c.correlation},
-                          {"reference_rms_mm", c.reference_rms_mm}, {"extracted_rms_mm", c.extracted_rms_mm}};
-  };
   nlohmann::json j = nlohmann::json::array();
   for (const auto& r : rows) {
-    j.push_back({{"actor", r.actor}, {"scan", r.scan}, {"coarse_band_rms_mm", r.coarse_band_rms_mm},
-                 {"wrinkles", cmp(r.wrinkles)}, {"wrinkles_band", cmp(r.wrinkles_band)}, {"detail", cmp(r.detail)},
-                 {"detail_band", cmp(r.detail_band)}, {"detail_regions", cmp(r.detail_regions)},
-                 {"detail_regions_band", cmp(r.detail_regions_band)}});
+    j.push_back({{"actor", r.actor},
+                 {"scan", r.scan},
+                 {"coarse_band_rms_mm", r.coarse_band_rms_mm},
+                 {"wrinkles", MapComparisonJson(r.wrinkles)},
+                 {"wrinkles_band", MapComparisonJson(r.wrinkles_band)},
+                 {"detail", MapComparisonJson(r.detail)},
+                 {"detail_band", MapComparisonJson(r.detail_band)},
+                 {"detail_regions", MapComparisonJson(r.detail_regions)},
+                 {"detail_regions_band", MapComparisonJson(r.detail_regions_band)}});
   }
   return nlohmann::json{{"scans", j}, {"seconds", seconds}}.dump(1);
 }

@@ -51,15 +51,11 @@ std::string PairRegressionMetrics::ToTable() const {
 }
 
 std::string PairRegressionMetrics::ToJson() const {
-  auto cmp = [](const MapComparison& c) {
-    return nlohmann::json{{"rmse_mm", c.rmse_mm}, {"correlation", c.correlation}, {"rms_mm", c.extracted_rms_mm},
-                          {"true_rms_mm", c.reference_rms_mm}};
-  };
   return nlohmann::json{{"pairs", pairs},
                         {"regressor", regressor},
-                        {"prediction", cmp(prediction)},
-                        {"pca_ceiling", cmp(pca_ceiling)},
-                        {"mean_patch", cmp(mean_patch)}}
+                        {"prediction", MapComparisonJson(prediction)},
+                        {"pca_ceiling", MapComparisonJson(pca_ceiling)},
+                        {"mean_patch", MapComparisonJson(mean_patch)}}
       .dump(1);
 }
 

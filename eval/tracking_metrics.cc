@@ -1,6 +1,5 @@
 #include "eval/tracking_metrics.h"
 
-#include <algorithm>
 #include <cstring>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -108,10 +107,7 @@ TrackedFrame TruthAsTrackedFrame(const FaceRig& rig, const FrameTruth& truth, in
 }
 
 Eigen::VectorXd TruthIdentity(const FaceRig& rig, const FrameTruth& truth) {
-  Eigen::VectorXd a = Eigen::VectorXd::Zero(rig.num_identity());
-  const Eigen::Index n = std::min<Eigen::Index>(a.size(), truth.identity.size());
-  a.head(n) = truth.identity.head(n);
-  return a;
+  return ZeroPadded(truth.identity, rig.num_identity());
 }
 
 }  // namespace crease

@@ -20,6 +20,17 @@ namespace crease::app {
 
 namespace fs = std::filesystem;
 
+namespace {
+
+// Comma-separated pair files (--pairs A.cpr,B.cpr).
+std::vector<fs::path> PairFiles(const std::string& list) {
+  std::vector<fs::path> files;
+  for (const auto& p : SplitComma(list)) files.emplace_back(p);
+  return files;
+}
+
+}  // namespace
+
 void AddTrainCommands(CLI::App& app) {
   {
     auto* cmd = app.add_subcommand("train", "Train the detail model (paper Sec. 4) on a scan set");
@@ -57,9 +68,7 @@ void AddTrainCommands(CLI::App& app) {
       };
       auto line = [](const std::string& l) { std::printf("  %s\n", l.c_str()); };
       if (!pairs_in.empty()) {
-        std::vector<fs::path> pair_files;
-        for (const auto& p : SplitComma(pairs_in)) pair_files.emplace_back(p);
-        const TrainingPairs pairs = ReadTrainingPairs(pair_files);
+        const TrainingPairs pairs = ReadTrainingPairs(PairFiles(pairs_in));
         const TrainingOptions options = OptionsForPairs(pairs, pairs_in, apply_user_options);
         std::printf("training the PCA and the cascade on %lld pairs of %s\n", static_cast<long long>(pairs.texture.rows()),
                     pairs_in.c_str());
@@ -139,9 +148,8 @@ void AddTrainCommands(CLI::App& app) {
         ->required();
     eval_cmd->add_option("--json", eval_json, "Write the metrics as JSON");
     eval_cmd->callback([] {
-      std::vector<fs::path> paths;
-      for (const auto& p : SplitComma(eval_pairs)) paths.emplace_back(p);
-      const PairRegressionMetrics m = EvaluatePairs(ReadDetailModel(eval_model), ReadTrainingPairs(paths), eval_pairs);
+      const PairRegressionMetrics m =
+          EvaluatePairs(ReadDetailModel(eval_model), ReadTrainingPairs(PairFiles(eval_pairs)), eval_pairs);
       std::printf("%s", m.ToTable().c_str());
       if (!eval_json.empty()) WriteFileAtomic(eval_json, [&](std::ostream& out) { out << m.ToJson() << "\n"; });
     });

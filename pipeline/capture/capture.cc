@@ -6,11 +6,11 @@
 
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
 #include "core/image_io.h"
 #include "core/options.h"
+#include "core/uv_raster.h"
 #include "pipeline/capture/landmarks.h"
 #include "pipeline/training/detail_extraction.h"
 
@@ -40,8 +40,7 @@ cv::Mat WrinkleTextureFromDisplacement(const cv::Mat& displacement, int R) {
                       displacement.rows));
   cv::Mat d;
   displacement.convertTo(d, CV_32F);
-  if (d.rows != R) cv::resize(d, d, cv::Size(R, R), 0, 0, d.rows > R ? cv::INTER_AREA : cv::INTER_LINEAR);
-  cv::Mat t = 0.5 + 0.5 * d;
+  cv::Mat t = 0.5 + 0.5 * ResampleSquareMap(d, R);
   cv::patchNaNs(t, 0.5);
   cv::min(cv::max(t, 0.0), 1.0, t);
   return t;

@@ -235,7 +235,25 @@ double Bilinear8(const cv::Mat& image, double x, double y) {
   return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x1]) + fy * ((1 - fx) * r1[x0] + fx * r1[x1]);
 }
 
+// ξ_α's measure: the gray change, in [0, 1], between a point at `a` in `image_a` and
+// at (bx, by) in `image_b` (8-bit images).
+double IntensityChange(const cv::Mat& image_a, const cv::Point2f& a, const cv::Mat& image_b, double bx, double by) {
+  return std::abs(Bilinear8(image_a, a.x, a.y) - Bilinear8(image_b, bx, by)) / 255.0;
+}
+
 }  // namespace
+
+std::vector<uint8_t> TrackLucasKanade(const FlowRefinementOptions& o, cv::InputArray previous, cv::InputArray next,
+                                      const std::vector<cv::Point2f>& from, std::vector<cv::Point2f>* to,
+                                      bool use_initial) {
+  std::vector<uint8_t> status;
+  std::vector<float> error;
+  cv::calcOpticalFlowPyrLK(
+      previous, next, from, *to, status, error, cv::Size(o.lk_window, o.lk_window), o.lk_pyramid_levels - 1,
+      cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, o.lk_max_iterations, o.lk_epsilon_px),
+      use_initial ? cv::OPTFLOW_USE_INITIAL_FLOW : 0, o.lk_min_eigenvalue);
+  return status;
+}
 
 struct FlowRefiner::Impl {
   const FaceRig& rig;
@@ -592,21 +610,14 @@ void FlowRefiner::Impl::TrackFromReference(const std::vector<cv::Mat>& pyramid, 
     to.emplace_back(static_cast<float>((*flow)(i, 0)), static_cast<float>((*flow)(i, 1)));
   }
   if (idx.empty()) return;
-  std::vector<uint8_t> lk_status;
-  std::vector<float> lk_error;
-  const cv::Size win(o.lk_window, o.lk_window);
-  cv::calcOpticalFlowPyrLK(reference_pyramid, pyramid, from, to, lk_status, lk_error, win, o.lk_pyramid_levels - 1,
-                           cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, o.lk_max_iterations,
-                                            o.lk_epsilon_px),
-                           cv::OPTFLOW_USE_INITIAL_FLOW, o.lk_min_eigenvalue);
+  const std::vector<uint8_t> lk_status = TrackLucasKanade(o, reference_pyramid, pyramid, from, &to, true);
   for (size_t k = 0; k < idx.size(); ++k) {
     const int i = idx[k];
     if (!lk_status[k] || !std::isfinite(to[k].x) || !std::isfinite(to[k].y)) continue;
     const Eigen::RowVector2d p(to[k].x, to[k].y);
     if ((p - flow->row(i)).norm() > o.flow_reference_max_px) continue;
     if (p.x() < 0 || p.y() < 0 || p.x() > K.width - 1 || p.y() > K.height - 1) continue;
-    const double d = std::abs(Bilinear8(reference_pyramid[0], from[k].x, from[k].y) - Bilinear8(pyramid[0], p.x(), p.y())) / 255.0;
-    if (d > o.outlier_intensity) continue;
+    if (IntensityChange(reference_pyramid[0], from[k], pyramid[0], p.x(), p.y()) > o.outlier_intensity) continue;
     flow->row(i) = p;
     ++out->reference_tracked;
   }
@@ -961,12 +972,8 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
     }
     out.no_source = static_cast<int>(std::count(vis.begin(), vis.end(), 1)) - static_cast<int>(idx.size());
     if (!idx.empty()) {
-      std::vector<uint8_t> lk_status;
-      std::vector<float> lk_error;
-      cv::calcOpticalFlowPyrLK(
-          s.prev_pyramid, pyramid, from, to, lk_status, lk_error, win, o.lk_pyramid_levels - 1,
-          cv::TermCriteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, o.lk_max_iterations, o.lk_epsilon_px),
-          o.lk_predict_from_tracker ? cv::OPTFLOW_USE_INITIAL_FLOW : 0, o.lk_min_eigenvalue);
+      const std::vector<uint8_t> lk_status =
+          TrackLucasKanade(o, s.prev_pyramid, pyramid, from, &to, o.lk_predict_from_tracker);
       const cv::Mat& prev_image = s.prev_pyramid[0];
       const cv::Mat& image = pyramid[0];
       for (size_t k = 0; k < idx.size(); ++k) {
@@ -979,8 +986,7 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
         }
         flow(i, 0) = x;
         flow(i, 1) = y;
-        const double d = std::abs(Bilinear8(prev_image, from[k].x, from[k].y) - Bilinear8(image, x, y)) / 255.0;
-        if (d > o.outlier_intensity) {
+        if (IntensityChange(prev_image, from[k], image, x, y) > o.outlier_intensity) {
           ++out.intensity_outliers;
           continue;  // outlier
         }

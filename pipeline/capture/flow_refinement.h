@@ -168,6 +168,7 @@
 #include <vector>
 
 #include <opencv2/core/mat.hpp>
+#include <opencv2/core/types.hpp>
 
 #include "core/camera.h"
 #include "core/face_rig.h"
@@ -366,6 +367,16 @@ struct RefinedFrame {
 // LK dominates (~15 µs per point and 3 levels in OpenCV's CPU code). Cheaper
 // settings (same run): flow_point_spacing_mm = 10 (204 visible points) 4.8 ms;
 // 2 pyramid levels with lk_predict_from_tracker 5.1 ms.
+// Eq. 5's pyramidal Lucas–Kanade with the options' window, pyramid levels, stopping
+// rule and minimum eigenvalue, from `from` in `previous` to `next` (8-bit gray
+// images, or their pyramids from cv::buildOpticalFlowPyramid). `to`: the starting
+// positions when `use_initial` (else overwritten), the tracked ones after. Returns
+// LK's status per point (0 = not found). The refinement and the eval's "LK from the
+// true positions" both run it.
+std::vector<uint8_t> TrackLucasKanade(const FlowRefinementOptions& options, cv::InputArray previous,
+                                      cv::InputArray next, const std::vector<cv::Point2f>& from,
+                                      std::vector<cv::Point2f>* to, bool use_initial);
+
 class FlowRefiner {
  public:
   // Throws Error when the rig lacks the 68 iBUG landmarks or expressions, has no face

@@ -7,6 +7,7 @@
 #include <limits>
 #include <optional>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
@@ -432,6 +433,14 @@ void MapMoments::Add(const cv::Mat& extracted, const cv::Mat& reference, const c
       if (k[i]) AddValue(x[i], y[i]);
     }
   }
+}
+
+nlohmann::json MapComparisonJson(const MapComparison& c) {
+  return {{"texels", c.texels},
+          {"rmse_mm", c.rmse_mm},
+          {"correlation", c.correlation},
+          {"reference_rms_mm", c.reference_rms_mm},
+          {"extracted_rms_mm", c.extracted_rms_mm}};
 }
 
 void MapMoments::AddValue(double x, double y) {

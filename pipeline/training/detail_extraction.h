@@ -48,6 +48,7 @@
 #include <vector>
 
 #include <cstdint>
+#include <nlohmann/json_fwd.hpp>
 #include <opencv2/core/mat.hpp>
 
 #include "core/face_rig.h"
@@ -151,6 +152,9 @@ struct MapComparison {
   double extracted_rms_mm = 0.0;
 };
 MapComparison CompareMaps(const cv::Mat& extracted, const cv::Mat& reference, const cv::Mat& mask);
+// As JSON: texels, rmse_mm, correlation, reference_rms_mm, extracted_rms_mm (the
+// reports of training, capture evaluation and the detail ladder).
+nlohmann::json MapComparisonJson(const MapComparison& c);
 
 // The sums behind CompareMaps, to pool texels over several maps (e.g. all frames
 // of a sequence): Add() each (extracted, reference, mask), then Result().

@@ -114,4 +114,11 @@ ScanSet ReadScanSet(const fs::path& dir) {
   return set;
 }
 
+std::vector<int> NeutralFirst(const ScanActor& actor) {
+  std::vector<int> order = {actor.neutral};
+  for (int s = 0; s < static_cast<int>(actor.scans.size()); ++s)
+    if (s != actor.neutral) order.push_back(s);
+  return order;
+}
+
 }  // namespace crease

@@ -47,6 +47,9 @@ struct ScanActor {
   std::vector<ScanEntry> scans;
 };
 
+// The indices of the actor's scans, the neutral first (the order Sec. 4.1 extracts in).
+std::vector<int> NeutralFirst(const ScanActor& actor);
+
 struct ScanSet {
   std::filesystem::path root;
   std::filesystem::path rig;  // empty when the set names no rig

@@ -49,8 +49,7 @@ void TrainingOptions::Check() const {
   pca.Check();
   ferns.Check();
   baseline.Check();
-  Require(training_targets == "extracted" || training_targets == "truth",
-          fmt::format("TrainingOptions.training_targets = '{}': expected extracted or truth", training_targets));
+  CheckOneOf("TrainingOptions", "training_targets", training_targets, {"extracted", "truth"});
   Require(!training_lights.empty(), "TrainingOptions.training_lights must be \"all\", \"first\" or light names");
   CheckGe("TrainingOptions", "max_actors", max_actors, 0);
   CheckGe("TrainingOptions", "validation_band_mm", validation_band_mm, 0.0);
@@ -119,14 +118,6 @@ cv::Mat ReadTruth(const fs::path& path, int R) {
   return truth;
 }
 
-json ComparisonJson(const MapComparison& c) {
-  return {{"texels", c.texels},
-          {"rmse_mm", c.rmse_mm},
-          {"correlation", c.correlation},
-          {"reference_rms_mm", c.reference_rms_mm},
-          {"extracted_rms_mm", c.extracted_rms_mm}};
-}
-
 }  // namespace
 
 std::string TrainingSummary::ToJson() const {
@@ -148,14 +139,14 @@ std::string TrainingSummary::ToJson() const {
   json acc = json::array();
   for (const auto& s : accuracy) {
     json regions = json::object();
-    for (const auto& [name, c] : s.regions) regions[name] = ComparisonJson(c);
+    for (const auto& [name, c] : s.regions) regions[name] = MapComparisonJson(c);
     json regions_band = json::object();
-    for (const auto& [name, c] : s.regions_band) regions_band[name] = ComparisonJson(c);
+    for (const auto& [name, c] : s.regions_band) regions_band[name] = MapComparisonJson(c);
     acc.push_back({{"actor", s.actor},
                    {"scan", s.scan},
-                   {"face", ComparisonJson(s.face)},
+                   {"face", MapComparisonJson(s.face)},
                    {"regions", regions},
-                   {"face_wrinkle_band", ComparisonJson(s.face_band)},
+                   {"face_wrinkle_band", MapComparisonJson(s.face_band)},
                    {"regions_wrinkle_band", regions_band}});
   }
   j["detail_extraction_accuracy"] = acc;
@@ -270,9 +261,7 @@ TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const
     as.name = actor.name;
     // --- Sec. 4.1: read the scans (neutral first).
     auto t0 = Clock::now();
-    std::vector<int> order = {actor.neutral};
-    for (int s = 0; s < static_cast<int>(actor.scans.size()); ++s)
-      if (s != actor.neutral) order.push_back(s);
+    const std::vector<int> order = NeutralFirst(actor);
     std::vector<TriMesh> meshes;
     std::vector<std::string> names;
     for (int s : order) {
