@@ -104,33 +104,6 @@ cv::Mat ReadMap(const fs::path& path, int R, bool resample = false) {
   return m;
 }
 
-SurfaceError MeasureSurface(const TriMesh& h, const RayCaster& truth, double max_distance) {
-  std::vector<Eigen::Vector3f> origins(static_cast<size_t>(h.num_vertices())), dirs(origins.size());
-  for (int i = 0; i < h.num_vertices(); ++i) {
-    origins[i] = h.V.row(i).cast<float>().transpose();
-    dirs[i] = h.N.row(i).cast<float>().transpose().normalized();
-  }
-  std::vector<SignedHit> hits;
-  truth.IntersectSignedBatch(origins, dirs, static_cast<float>(max_distance), &hits);
-  SurfaceError e;
-  double sum = 0, sum2 = 0, angle = 0;
-  for (size_t i = 0; i < hits.size(); ++i) {
-    if (!hits[i].valid() || !dirs[i].allFinite()) continue;
-    const double d = std::abs(hits[i].t);
-    const double c = std::clamp(static_cast<double>(dirs[i].dot(hits[i].geometric_normal)), -1.0, 1.0);
-    sum += d;
-    sum2 += d * d;
-    angle += std::acos(std::abs(c)) * 180.0 / M_PI;
-    ++e.samples;
-  }
-  if (e.samples > 0) {
-    e.distance_mm = sum / e.samples;
-    e.distance_rms_mm = std::sqrt(sum2 / e.samples);
-    e.normal_deg = angle / e.samples;
-  }
-  return e;
-}
-
 json ComparisonJson(const MapComparison& c) {
   json j = MapComparisonJson(c);
   j["amplitude_ratio"] = c.reference_rms_mm > 0 ? c.extracted_rms_mm / c.reference_rms_mm : 0.0;
@@ -141,7 +114,10 @@ json SurfaceJson(const SurfaceError& s) {
   return {{"samples", s.samples},
           {"distance_mm", s.distance_mm},
           {"distance_rms_mm", s.distance_rms_mm},
-          {"normal_deg", s.normal_deg}};
+          {"normal_deg", s.normal_deg},
+          {"wrinkle_samples", s.wrinkle_samples},
+          {"wrinkle_distance_mm", s.wrinkle_distance_mm},
+          {"wrinkle_normal_deg", s.wrinkle_normal_deg}};
 }
 
 double Amp(const MapComparison& c) { return c.reference_rms_mm > 0 ? c.extracted_rms_mm / c.reference_rms_mm : 0.0; }
@@ -151,6 +127,9 @@ void Accumulate(const SurfaceError& s, SurfaceError* sum) {
   sum->distance_mm += s.distance_mm;
   sum->distance_rms_mm += s.distance_rms_mm;
   sum->normal_deg += s.normal_deg;
+  sum->wrinkle_samples += s.wrinkle_samples;
+  sum->wrinkle_distance_mm += s.wrinkle_distance_mm;
+  sum->wrinkle_normal_deg += s.wrinkle_normal_deg;
 }
 
 void Divide(int n, SurfaceError* s) {
@@ -158,6 +137,8 @@ void Divide(int n, SurfaceError* s) {
   s->distance_mm /= n;
   s->distance_rms_mm /= n;
   s->normal_deg /= n;
+  s->wrinkle_distance_mm /= n;
+  s->wrinkle_normal_deg /= n;
 }
 
 // The dataset's per-frame expression displacement file (synth/dataset.h).
@@ -482,6 +463,49 @@ json FlowStagesJson(const FlowStageErrors& f) {
 
 }  // namespace
 
+SurfaceError MeasureSurface(const TriMesh& h, const RayCaster& truth, double max_distance, const cv::Mat& region) {
+  std::vector<Eigen::Vector3f> origins(static_cast<size_t>(h.num_vertices())), dirs(origins.size());
+  for (int i = 0; i < h.num_vertices(); ++i) {
+    origins[i] = h.V.row(i).cast<float>().transpose();
+    dirs[i] = h.N.row(i).cast<float>().transpose().normalized();
+  }
+  std::vector<SignedHit> hits;
+  truth.IntersectSignedBatch(origins, dirs, static_cast<float>(max_distance), &hits);
+  auto in_region = [&](size_t i) {
+    if (region.empty() || h.UV.rows() != h.V.rows()) return false;
+    const int x = std::clamp(static_cast<int>(std::floor(h.UV(i, 0) * region.cols)), 0, region.cols - 1);
+    const int y = std::clamp(static_cast<int>(std::floor(h.UV(i, 1) * region.rows)), 0, region.rows - 1);
+    return region.at<uint8_t>(y, x) != 0;
+  };
+  SurfaceError e;
+  double sum = 0, sum2 = 0, angle = 0, wsum = 0, wangle = 0;
+  for (size_t i = 0; i < hits.size(); ++i) {
+    if (!hits[i].valid() || !dirs[i].allFinite()) continue;
+    const double d = std::abs(hits[i].t);
+    const double c = std::clamp(static_cast<double>(dirs[i].dot(hits[i].geometric_normal)), -1.0, 1.0);
+    const double a = std::acos(std::abs(c)) * 180.0 / M_PI;
+    sum += d;
+    sum2 += d * d;
+    angle += a;
+    ++e.samples;
+    if (in_region(i)) {
+      wsum += d;
+      wangle += a;
+      ++e.wrinkle_samples;
+    }
+  }
+  if (e.samples > 0) {
+    e.distance_mm = sum / e.samples;
+    e.distance_rms_mm = std::sqrt(sum2 / e.samples);
+    e.normal_deg = angle / e.samples;
+  }
+  if (e.wrinkle_samples > 0) {
+    e.wrinkle_distance_mm = wsum / e.wrinkle_samples;
+    e.wrinkle_normal_deg = wangle / e.wrinkle_samples;
+  }
+  return e;
+}
+
 CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& dataset,
                                    const CaptureEvalOptions& options) {
   options.Check();
@@ -576,7 +600,8 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     return dataset / fmt::format(fmt::runtime(pattern), fmt::arg("frame", index));
   };
   MatX2d prev_err_coarse, prev_err_refined;
-  cv::Mat prev_band_err;
+  cv::Mat prev_band_err, prev_D;
+  Eigen::VectorXd prev_beta;
   int prev_frame = -2, tracked_count = 0;
   const int vectors_target = options.vectors_frame >= 0 ? options.vectors_frame
                              : frames.empty()            ? -1
@@ -744,6 +769,11 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
         }
         e.d_jitter_mm = n ? std::sqrt(sum / n) : 0.0;
       }
+      if (prev_frame == index - 1 && !prev_D.empty() && prev_beta.size() == beta.size() &&
+          (beta - prev_beta).cwiseAbs().maxCoeff() < 1e-6) {
+        e.still = true;
+        e.d_still_correlation = CompareMaps(D, prev_D, wrinkle_mask).correlation;
+      }
     }
 
     // H^t against the true high-resolution surface (every surface_every-th tracked frame).
@@ -752,10 +782,11 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       truth_hires.V = Transform(truth.cam_from_head, truth_hires.V);
       const RayCaster caster(truth_hires);
       const cv::Mat zero = cv::Mat::zeros(R, R, CV_32F);
-      e.surface_coarse = MeasureSurface(hifi->Build(refined_aligned, zero), caster, options.surface_max_distance_mm);
-      e.surface_meso = MeasureSurface(hifi->Build(refined_aligned, meso), caster, options.surface_max_distance_mm);
+      const double max_mm = options.surface_max_distance_mm;
+      e.surface_coarse = MeasureSurface(hifi->Build(refined_aligned, zero), caster, max_mm, wrinkle_mask);
+      e.surface_meso = MeasureSurface(hifi->Build(refined_aligned, meso), caster, max_mm, wrinkle_mask);
       if (!D.empty()) {
-        e.surface_full = MeasureSurface(hifi->Build(refined_aligned, D + meso), caster, options.surface_max_distance_mm);
+        e.surface_full = MeasureSurface(hifi->Build(refined_aligned, D + meso), caster, max_mm, wrinkle_mask);
       }
       e.has_surface = true;
     }
@@ -763,6 +794,8 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     prev_err_coarse = err_c;
     prev_err_refined = err_r;
     prev_band_err = band_err;
+    prev_D = D;
+    prev_beta = beta;
     prev_frame = index;
     s.per_frame.push_back(e);
   }
@@ -821,6 +854,10 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
         s.d_jitter_mm += e.d_jitter_mm;
         ++d_jitter_frames;
       }
+      if (e.still) {
+        s.d_still_correlation += e.d_still_correlation;
+        ++s.still_pairs;
+      }
     }
     if (e.has_surface) {
       ++s.surface_frames;
@@ -849,6 +886,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   s.d_wrinkle_band = pooled_band.Result();
   s.d_layer_band = pooled_layer_band.Result();
   if (d_jitter_frames > 0) s.d_jitter_mm /= d_jitter_frames;
+  if (s.still_pairs > 0) s.d_still_correlation /= s.still_pairs;
   Divide(s.surface_frames, &s.surface_coarse);
   Divide(s.surface_frames, &s.surface_meso);
   Divide(s.surface_frames, &s.surface_full);
@@ -896,7 +934,9 @@ std::string CaptureEvalSummary::ToJson() const {
                        {"wrinkle_layer_band", ComparisonJson(d_layer_band)},
                        {"wrinkle_layer_active_frames", layer_active_frames},
                        {"jitter_band_mm", d_jitter_mm},
+                       {"still_pairs", still_pairs},
                        {"offset_frames", offset_frames}};
+  if (still_pairs > 0) j["displacement"]["still_correlation"] = d_still_correlation;  // else not measured
   if (offset_frames > 0) {  // else not measured (null), never a misleading 0
     j["displacement"]["offset_mm"] = d_offset_mm;
     j["displacement"]["offset_slide_mm"] = d_offset_slide_mm;
@@ -937,6 +977,7 @@ std::string CaptureEvalSummary::ToJson() const {
                              {"face_band", ComparisonJson(e.d_face_band)},
                              {"wrinkle_regions_band", ComparisonJson(e.d_wrinkle_band)},
                              {"jitter_band_mm", e.d_jitter_mm}};
+        if (e.still) f["displacement"]["still_correlation"] = e.d_still_correlation;
         if (e.has_offset) {
           f["displacement"]["offset_mm"] = e.d_offset_mm;
           f["displacement"]["offset_correlation"] = e.d_offset_correlation;
@@ -1037,6 +1078,11 @@ std::string CaptureEvalSummary::ToMarkdown() const {
     }
     o << fmt::format("\nD^t jitter (frame-to-frame change of the band error, wrinkle regions): {:.4f} mm\n",
                      d_jitter_mm);
+    if (still_pairs > 0) {
+      o << fmt::format("D^t on a still face (the true expression held), {} frame pairs: correlation with the previous "
+                       "frame's {:.3f} (wrinkle regions)\n",
+                       still_pairs, d_still_correlation);
+    }
     if (offset_frames > 0) {
       o << fmt::format("Wrinkle offset (the shift of D^t's lines against the true ones that correlates best; + = "
                        "higher on the face), {} frames: mean {:+.2f} mm, last quarter minus first quarter {:+.2f} mm "
@@ -1052,11 +1098,15 @@ std::string CaptureEvalSummary::ToMarkdown() const {
   if (surface_frames > 0) {
     o << fmt::format("## Surface H^t against the true high-resolution surface, {} frames (rigidly aligned)\n\n",
                      surface_frames);
-    o << "| layers | normal error, deg | distance, mm |\n|---|---|---|\n";
-    o << fmt::format("| L~^t (no detail) | {:.2f} | {:.3f} |\n", surface_coarse.normal_deg, surface_coarse.distance_mm);
-    o << fmt::format("| L~^t + D^HF | {:.2f} | {:.3f} |\n", surface_meso.normal_deg, surface_meso.distance_mm);
-    o << fmt::format("| H^t = L~^t + D^t + D^HF | {:.2f} | {:.3f} |\n\n", surface_full.normal_deg,
-                     surface_full.distance_mm);
+    o << "| layers | normal error, deg | distance, mm | wrinkle regions: normal error, deg | distance, mm |\n"
+         "|---|---|---|---|---|\n";
+    for (const auto& [name, e] : {std::pair<const char*, const SurfaceError&>{"L~^t (no detail)", surface_coarse},
+                                  {"L~^t + D^HF", surface_meso},
+                                  {"H^t = L~^t + D^t + D^HF", surface_full}}) {
+      o << fmt::format("| {} | {:.2f} | {:.3f} | {:.2f} | {:.3f} |\n", name, e.normal_deg, e.distance_mm,
+                       e.wrinkle_normal_deg, e.wrinkle_distance_mm);
+    }
+    o << "\n";
   }
   if (fps > 0) {
     o << fmt::format("## Speed\n\n{:.1f} frames per second (file I/O excluded); tracking {:.0f} %, detail {:.0f} % "

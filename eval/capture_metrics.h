@@ -35,6 +35,8 @@
 #include <vector>
 
 #include "core/camera.h"
+#include "core/ray_caster.h"
+#include "core/tri_mesh.h"
 #include "pipeline/capture/capture_io.h"
 #include "pipeline/training/detail_extraction.h"
 
@@ -93,6 +95,11 @@ struct SurfaceError {
   double distance_mm = 0;   // mean |distance|
   double distance_rms_mm = 0;
   double normal_deg = 0;    // mean angle between the normals
+  // The same over the H^t vertices whose UV lies in the wrinkle regions (issue 17:
+  // a whole-face mean hides a forehead line).
+  int wrinkle_samples = 0;
+  double wrinkle_distance_mm = 0;
+  double wrinkle_normal_deg = 0;
 };
 
 // The refinement's steps (Sec. 5.1) at its flow points, 2D error against the true
@@ -136,6 +143,11 @@ struct FrameCaptureEval {
   bool has_displacement = false;
   MapComparison d_face, d_wrinkle, d_face_band, d_wrinkle_band;
   double d_jitter_mm = 0;  // band, wrinkle regions
+  // Still face: the true expression equals the previous frame's (a hold) and D^t
+  // exists in both; the correlation of D^t with the previous frame's D^t in the
+  // wrinkle regions (1 = the regression is stable where nothing changes).
+  bool still = false;
+  double d_still_correlation = 0;
   // Wrinkle offset in offset_region, mm (+: D^t's wrinkles lie above the true ones,
   // towards the top of the face); measured on active frames only (has_offset).
   bool has_offset = false;
@@ -166,6 +178,8 @@ struct CaptureEvalSummary {
   int layer_active_frames = 0;
   std::string detail_truth;  // the truth used ("extraction" or "wrinkle-layer")
   double d_jitter_mm = 0;  // mean over consecutive frame pairs
+  int still_pairs = 0;               // consecutive frames of a still face (FrameCaptureEval::still)
+  double d_still_correlation = 0;    // mean over them
   // Wrinkle offset: mean over the measured frames, and the slide — the mean of the
   // last quarter of the measured frames minus that of the first quarter (for the
   // moving-light preset: light from above minus light from the front, Fig. 14).
@@ -204,6 +218,12 @@ bool BestVerticalOffset(const cv::Mat& D, const cv::Mat& G, const cv::Mat& mask,
 // `on_face` the vertices evaluated (the face chart's, with a truth correspondence).
 FlowStageErrors MeasureFlowStages(const CaptureFrameArrays& arrays, const Camera& camera, const MatX2d& truth_px,
                                   const std::vector<char>& truth_visible, const std::vector<char>& on_face);
+
+// H^t (`h`: V, N, UV) against the true surface `truth`: along each vertex normal
+// (within max_distance_mm) the distance and the angle between the normals; the
+// wrinkle_* figures over the vertices whose UV falls in `region` (R×R CV_8U in the
+// texel convention of core/uv_raster.h; empty: none).
+SurfaceError MeasureSurface(const TriMesh& h, const RayCaster& truth, double max_distance_mm, const cv::Mat& region);
 
 // Evaluates the capture folder `capture` (written by `crease capture`) against the
 // sequence dataset `dataset` (written by `crease synth sequence` with its maps).

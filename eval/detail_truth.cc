@@ -2,12 +2,14 @@
 
 #include <algorithm>
 #include <chrono>
+#include <unistd.h>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
 #include "core/error.h"
+#include "core/image_io.h"
 #include "core/json_io.h"
 #include "core/mesh_io.h"
 #include "core/mesh_ops.h"
@@ -102,7 +104,9 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
       const cv::Mat detail = wrinkles + band;
       const WrinkleBandMask bm = MakeWrinkleBandMask(mask, sigma);
       const cv::Mat db = WrinkleBand(d.displacement, bm);
-      ExtractionTruthRow row{sa.name, scan.name};
+      ExtractionTruthRow row;
+      row.actor = sa.name;
+      row.scan = scan.name;
       row.wrinkles = CompareMaps(d.displacement, wrinkles, mask);
       row.detail = CompareMaps(d.displacement, detail, mask);
       row.wrinkles_band = CompareMaps(db, WrinkleBand(wrinkles, bm), mask);
@@ -145,6 +149,30 @@ std::string ExtractionTruthReport::ToJson() const {
                  {"detail_regions_band", MapComparisonJson(r.detail_regions_band)}});
   }
   return nlohmann::json{{"scans", j}, {"seconds", seconds}}.dump(1);
+}
+
+int WriteDetailTruthMaps(const std::filesystem::path& dataset, const DetailExtractionOptions& detail, int frames,
+                         const std::filesystem::path& out) {
+  namespace fs = std::filesystem;
+  const fs::path dataset_json = dataset / "dataset.json";
+  Require(fs::is_regular_file(dataset_json),
+          fmt::format("{}: missing; is {} a `crease synth sequence` dataset?", dataset_json.string(), dataset.string()));
+  const nlohmann::json info = ReadJsonFile(dataset_json);
+  const int first = info.value("first_frame", 0), count = info.value("frames", 0);
+  Require(count > 0, fmt::format("{}: no frames", dataset_json.string()));
+  const int n = frames < 0 ? count : std::min(frames, count);
+  const FaceRig rig = ReadRig(dataset / "rig.crig");
+  const DetailTruth truth(rig, ReadActor(dataset / "actor.json"), detail);
+  const fs::path tmp = out.parent_path() / fmt::format(".{}.tmp-{}", out.filename().string(), ::getpid());
+  fs::remove_all(tmp);
+  fs::create_directories(tmp);
+  for (int i = first; i < first + n; ++i) {
+    const Eigen::VectorXd beta = ScanExpression(rig, dataset / "truth" / fmt::format("{:06d}.json", i));
+    WriteImage(tmp / fmt::format("{:06d}.exr", i), ResampleSquareMap(truth.Detail(beta), detail.map_resolution));
+  }
+  fs::remove_all(out);
+  fs::rename(tmp, out);
+  return n;
 }
 
 }  // namespace crease

@@ -94,4 +94,14 @@ struct ExtractionTruthOptions {
 // each scan truth.json; the set names its rig). Errors name the file.
 ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, const ExtractionTruthOptions& options);
 
+// The truth D* of frames first_frame … first_frame + frames − 1 of a studio sequence
+// (`crease synth sequence`; frames < 0: all) with the G of `detail`, as R×R maps
+// `out`/NNNNNN.exr (mm; R = detail.map_resolution): what `crease capture --set
+// wrinkle_map_from_maps=DIR` builds its wrinkle map from (the detail ladder's rung
+// R1: patches placed where the true wrinkles are) and what `crease eval` scores D^t
+// against. Writes into a temporary folder renamed to `out` at the end (an existing
+// `out` is replaced). Returns the number of maps written.
+int WriteDetailTruthMaps(const std::filesystem::path& dataset, const DetailExtractionOptions& detail, int frames,
+                         const std::filesystem::path& out);
+
 }  // namespace crease

@@ -61,6 +61,10 @@ void ExperimentDataset::VisitFields(OptionVisitor& v) {
   v.Field("mesh_every", mesh_every);
   v.Field("exclusive_capture", exclusive_capture);
   v.Field("cache_salt", cache_salt);
+  v.Field("scan_size", scan_size);
+  v.Field("leave_one_actor_out", leave_one_actor_out);
+  v.Field("loao_regressors", loao_regressors);
+  v.Field("patch_sites", patch_sites);
 }
 
 void ExperimentDataset::Check() const {
@@ -81,6 +85,16 @@ void ExperimentDataset::Check() const {
   CheckOneOf("dataset", "landmarks", landmarks, {"regressor", "dlib", "ground-truth-prior", "ground-truth-fit"});
   CheckGe("dataset", "landmark_noise_px", landmark_noise_px, 0.0);
   CheckGe("dataset", "mesh_every", mesh_every, 0);
+  if (!scan_size.empty()) {
+    int w = 0, h = 0;
+    char x = 0;
+    std::istringstream in(scan_size);
+    Require(static_cast<bool>(in >> w >> x >> h) && x == 'x' && w > 0 && h > 0 && in.peek() == EOF,
+            fmt::format("dataset.scan_size = '{}': expected WIDTHxHEIGHT, e.g. 1280x720", scan_size));
+  }
+  Require(!loao_regressors.empty(), "dataset.loao_regressors must name at least one regressor");
+  for (const auto& r : loao_regressors) CheckOneOf("dataset", "loao_regressors", r, {"ferns", "ridge", "nearest"});
+  CheckOneOf("dataset", "patch_sites", patch_sites, {"own", "truth"});
 }
 
 namespace {
@@ -193,6 +207,23 @@ void AppendSets(const json& section, std::vector<std::string>* argv) {
 
 std::string Join(const std::vector<std::string>& v, const char* sep) { return fmt::format("{}", fmt::join(v, sep)); }
 
+// One sweep value: `key` is a group of c.variants (value: a label, whose settings
+// are applied in order) or a section.field.
+void SetSweepValue(ExperimentConfig* config, const std::string& key, const json& value, const std::string& what) {
+  if (!config->variants.contains(key)) {
+    SetDotted(config, key, value, what);
+    return;
+  }
+  const json& group = config->variants.at(key);
+  if (!value.is_string() || !group.contains(value.get<std::string>())) {
+    std::vector<std::string> labels;
+    for (const auto& [label, settings] : group.items()) labels.push_back(label);
+    throw Error(fmt::format("{}: {} is not a variant of '{}' (variants: {})", what, value.dump(), key, Join(labels, ", ")));
+  }
+  for (const auto& [k, v] : group.at(value.get<std::string>()).items())
+    SetDotted(config, k, v, fmt::format("{} (variant {}={})", what, key, value.get<std::string>()));
+}
+
 std::string ShellQuote(const std::string& s) {
   if (!s.empty() && s.find_first_not_of("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-.,/=:+@%") ==
                         std::string::npos)
@@ -255,6 +286,20 @@ ExperimentConfig ParseExperimentConfigImpl(const std::string& yaml_text, const s
       c.seeds = value.get<int>();
     } else if (kReport.count(key)) {
       c.report[key] = value;
+    } else if (key == "variants") {
+      Require(value.is_object(), fmt::format("{}: 'variants' must map a group to its labelled settings", what));
+      for (const auto& [group, labels] : value.items()) {
+        Require(labels.is_object() && !labels.empty(),
+                fmt::format("{}: variants.{} must map each label to its settings", what, group));
+        for (const auto& [label, settings] : labels.items()) {
+          Require(settings.is_object(), fmt::format("{}: variants.{}.{} must map SECTION.FIELD to a value", what,
+                                                    group, label));
+          ExperimentConfig trial = c;
+          for (const auto& [k, v] : settings.items())
+            SetDotted(&trial, k, v, fmt::format("{}: variants.{}.{}", what, group, label));
+        }
+      }
+      c.variants = value;
     } else if (key == "profiles") {
       Require(value.is_object(), fmt::format("{}: 'profiles' must map a profile name to its settings", what));
       c.profiles = value;
@@ -295,7 +340,7 @@ ExperimentConfig ParseExperimentConfigImpl(const std::string& yaml_text, const s
             fmt::format("{}: sweep value '{}' must be a non-empty list", what, key));
     for (const auto& v : values) {
       ExperimentConfig trial = c;
-      SetDotted(&trial, key, v, fmt::format("{}: sweep", what));
+      SetSweepValue(&trial, key, v, fmt::format("{}: sweep", what));
     }
   }
   DatasetOf(c);
@@ -344,7 +389,7 @@ ExperimentConfig ApplyProfile(const ExperimentConfig& config, const std::string&
         Require(values.is_array() && !values.empty(), fmt::format("{}: sweep '{}' must be a non-empty list", what, key));
         for (const auto& value : values) {
           ExperimentConfig trial = c;
-          SetDotted(&trial, key, value, what + ": sweep");
+          SetSweepValue(&trial, key, value, what + ": sweep");
         }
         auto it = std::find_if(c.sweep.values.begin(), c.sweep.values.end(), [&](const auto& e) { return e.first == key; });
         if (it == c.sweep.values.end()) {
@@ -392,7 +437,7 @@ std::vector<ExperimentRun> ExpandRuns(const ExperimentConfig& config) {
     // In config order (json objects sort their keys; the sweep list keeps the order).
     for (const auto& [key, values] : config.sweep.values) {
       if (!point.contains(key)) continue;
-      SetDotted(&resolved, key, point.at(key), "sweep");
+      SetSweepValue(&resolved, key, point.at(key), "sweep");
       parts.push_back(key + "=" + ValueText(point.at(key)));
     }
     const std::string base = parts.empty() ? "base" : Join(parts, "_");
@@ -469,22 +514,23 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
     if (expressions.empty()) expressions = ScanSetOptions().expressions;
     expressions.resize(static_cast<size_t>(d.scan_expression_count));
   }
+  json scan_inputs = {{"actor", KeySectionOf(c, "actor")},
+                      {"actors", d.training_actors},
+                      {"seed", training_seed},
+                      {"cameras", d.scan_cameras},
+                      {"lights", d.scan_lights},
+                      {"expressions", expressions},
+                      {"samples", d.scan_samples}};
+  if (!d.scan_size.empty()) scan_inputs["size"] = d.scan_size;  // (absent: the keys of earlier caches)
   const ExperimentStage scans = add(
-      "scans",
-      {{"actor", KeySectionOf(c, "actor")},
-       {"actors", d.training_actors},
-       {"seed", training_seed},
-       {"cameras", d.scan_cameras},
-       {"lights", d.scan_lights},
-       {"expressions", expressions},
-       {"samples", d.scan_samples}},
-      {rig.key}, [&](const fs::path& dir) {
+      "scans", scan_inputs, {rig.key}, [&](const fs::path& dir) {
         std::vector<std::string> a = {"synth",     "scans",  "--rig",     rig_file.string(),
                                       "--actors",  std::to_string(d.training_actors),
                                       "--seed",    std::to_string(training_seed),
                                       "--cameras", std::to_string(d.scan_cameras),
                                       "--lights",  Join(d.scan_lights, ","),
                                       "--samples", std::to_string(d.scan_samples)};
+        if (!d.scan_size.empty()) a.insert(a.end(), {"--size", d.scan_size});
         for (const auto& e : expressions) {
           a.push_back("-e");
           a.push_back(e);
@@ -524,6 +570,15 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
         AppendSets(regression, &a);
         return a;
       });
+  if (d.leave_one_actor_out) {
+    add("loao", {{"training", regression_key}, {"regressors", d.loao_regressors}}, {pairs.key},
+        [&](const fs::path& dir) {
+          std::vector<std::string> a = {"model", "loao", "--pairs", (pairs.dir / "pairs.cpr").string(), "--regressors",
+                                        Join(d.loao_regressors, ","), "--json", (dir / "loao.json").string()};
+          AppendSets(regression, &a);
+          return a;
+        });
+  }
   if (!d.capture) return stages;
 
   std::string tracker_key;
@@ -569,11 +624,26 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
         });
     std::vector<std::string> capture_depends = {model.key, sequence.key};
     if (!tracker_key.empty()) capture_depends.push_back(tracker_key);
+    fs::path truth_maps;  // rung R1: the wrinkle map from the true detail of the wrinkle frames
+    if (d.patch_sites == "truth") {
+      CaptureOptions capture_options;
+      SetOptionsFromJson(SectionOf(c, "capture").dump(), "capture", &capture_options);
+      const int frames = capture_options.detail.wrinkle_frames;
+      const ExperimentStage& maps =
+          add("truth-maps", {{"frames", frames}}, {model.key, sequence.key}, [&](const fs::path& dir) {
+            return std::vector<std::string>{"truth-maps", "-d", (sequence.dir / "dataset").string(), "-m",
+                                            (model.dir / "model.cdm").string(), "--frames", std::to_string(frames),
+                                            "-o", (dir / "maps").string()};
+          });
+      capture_depends.push_back(maps.key);
+      truth_maps = maps.dir / "maps";
+    }
     json capture_inputs = {{"capture", KeySectionOf(c, "capture")},
                            {"landmarks", d.landmarks},
                            {"noise", d.landmark_noise_px},
                            {"mesh_every", d.mesh_every}};
     if (d.exclusive_capture) capture_inputs["exclusive"] = true;  // its timings were taken alone
+    if (d.patch_sites != "own") capture_inputs["patch_sites"] = d.patch_sites;
     add(
         "capture", capture_inputs,
         capture_depends, [&](const fs::path& dir) {
@@ -594,6 +664,7 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
             a.push_back("--no-meshes");
           }
           AppendSets(SectionOf(c, "capture"), &a);
+          if (!truth_maps.empty()) a.insert(a.end(), {"--set", "wrinkle_map_from_maps=" + truth_maps.string()});
           a.insert(a.end(), {"--overwrite", "-o", (dir / "capture").string()});
           return a;
         });
@@ -731,6 +802,12 @@ json CollectRunMetrics(const std::vector<ExperimentStage>& stages) {
         }
         metrics["model.pca_dims_85"] = dims;
       }
+    } else if (s.kind == "loao") {  // rung R0: the means over the held-out actors
+      const fs::path r = s.dir / "loao.json";
+      if (!fs::exists(r)) continue;
+      json flat = json::object();
+      Flatten(ReadJsonFile(r).at("mean"), "r0", &flat);
+      for (const auto& [k, v] : flat.items()) metrics[k] = v;
     } else if (s.kind == "eval") {
       const fs::path e = s.dir / "eval.json";
       if (fs::exists(e)) evals.push_back(ReadJsonFile(e));
@@ -1069,6 +1146,10 @@ void CollectExperiment(PlannedExperiment& p, const std::map<std::string, size_t>
   json sweep_keys = json::array(), baseline = json::object();
   for (const auto& [key, values] : config.sweep.values) {
     sweep_keys.push_back(key);
+    if (config.variants.contains(key)) {  // a group of variants has no base value
+      baseline[key] = nullptr;
+      continue;
+    }
     const auto [section, field] = SplitKey(key, "sweep");
     const json sec = SectionOf(config, section);
     baseline[key] = sec.contains(field) ? sec[field] : json(nullptr);
@@ -1078,6 +1159,7 @@ void CollectExperiment(PlannedExperiment& p, const std::map<std::string, size_t>
   json sections = json::object();
   for (const auto& [k, v] : config.sections) sections[k] = v;
   e["sections"] = sections;
+  e["variants"] = config.variants;
   for (const char* k : {"table", "figures", "claims"}) e[k] = config.report.contains(k) ? config.report[k] : json::array();
   e["runs"] = runs_ok;
   e["runs_failed"] = runs_failed;

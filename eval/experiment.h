@@ -2,10 +2,10 @@
 // (experiments/*.yaml), expanded into runs (sweep point × seed), each run a chain of
 // cached stages that are crease's own commands:
 //
-//   rig ─► scans ─► pairs ─► model ────┐
+//   rig ─► scans ─► pairs ─► model ────┐            (pairs ─► loao: rung R0, optional)
 //    │                                 ├─► capture ─► eval      (per test actor)
 //    ├─► tracker ──────────────────────┤
-//    └─► actor ─► sequence ────────────┘
+//    └─► actor ─► sequence ────────────┘            (model, sequence ─► truth-maps ─► capture: R1)
 //
 // Every stage is cached under cache/<stage>/<key>/, the key a hash of everything the
 // stage depends on: its own options, the keys of the stages it reads and crease's
@@ -29,7 +29,11 @@
 //                                      pipeline/capture/capture.h, eval/capture_metrics.h)
 //   sweep: {mode: none|list|grid, values: {section.field: [v, …], …}}
 //       list: each key on its own, the others at their base value (a one-at-a-time
-//       ablation); grid: the Cartesian product.
+//       ablation); grid: the Cartesian product. A sweep key may also name a group
+//       of `variants`, its values then the variants' labels.
+//   variants: {GROUP: {LABEL: {section.field: v, …}, …}, …}
+//       named bundles of settings swept as one value (the detail ladder's rungs:
+//       `rung: [R1, R2, R3]`; image sizes that set the studio and the scans).
 //   profiles: {quick: {set: {section.field: v}, sweep: {section.field: [...]}, seeds: N}, paper: {...}}
 //   table, figures, claims: passed to the report (reports/make_report.py) as they are.
 #pragma once
@@ -71,6 +75,15 @@ struct ExperimentDataset {
   int mesh_every = 0;
   bool exclusive_capture = false;    // run the capture alone (nothing beside it): its timings are clean
   std::string cache_salt;            // change to invalidate the cache after changing the method
+  std::string scan_size;             // scan image size WIDTHxHEIGHT ("" = the studio's default)
+  // Rung R0 of the detail ladder (issue 17): a `loao` stage scores the patch
+  // regression on each training actor held out (crease model loao).
+  bool leave_one_actor_out = false;
+  std::vector<std::string> loao_regressors = {"ferns", "ridge", "nearest"};
+  // Where capture places its patches: "own" (the paper: its wrinkle map of the first
+  // frames) or "truth" (rung R1: from the true detail D* of those frames, a
+  // `truth-maps` stage; studio sequences only).
+  std::string patch_sites = "own";
   void VisitFields(OptionVisitor& v);
   void Check() const;
 };
@@ -88,6 +101,7 @@ struct ExperimentConfig {
   std::map<std::string, nlohmann::json> sections;
   ExperimentSweep sweep;
   nlohmann::json profiles = nlohmann::json::object();
+  nlohmann::json variants = nlohmann::json::object();  // group → label → {section.field: value}
   nlohmann::json report = nlohmann::json::object();  // table, figures, claims
 };
 
@@ -117,7 +131,7 @@ std::vector<ExperimentRun> ShardRuns(const std::vector<ExperimentRun>& runs, int
 
 // One cached stage: what it depends on and the command that makes it.
 struct ExperimentStage {
-  std::string kind;                 // rig, scans, pairs, model, tracker, actor, sequence, capture, eval
+  std::string kind;                 // rig, scans, pairs, model, loao, tracker, actor, sequence, truth-maps, capture, eval
   nlohmann::json key_inputs;        // everything the output depends on
   std::string key;                  // 16 hex digits of a 64-bit hash of key_inputs
   std::filesystem::path dir;        // cache/<kind>/<key>

@@ -8,6 +8,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/ray_caster.h"
 #include "pipeline/capture/capture_io.h"
 #include "pipeline/capture/flow_refinement.h"
 
@@ -113,6 +114,47 @@ TEST(CaptureMetrics, FlowStagesSplitTheErrorByStep) {
   WriteCaptureFrameArrays(path, a);
   EXPECT_TRUE(ReadCaptureFrameArrays(path).flow_vertex.empty());
   std::filesystem::remove(path);
+}
+
+// A flat true surface (z = 0) and H^t a grid 0.1 mm above it whose normals tilt by
+// 20° where u < 0.5: the whole-face angle is the average, the wrinkle-region one
+// (the region: u < 0.5) is 20°.
+TEST(CaptureMetrics, SurfaceErrorInTheWrinkleRegionsCountsOnlyTheirVertices) {
+  const int n = 11;
+  TriMesh plane, h;
+  plane.V.resize(4, 3);
+  plane.V << -10, -10, 0, 10, -10, 0, 10, 10, 0, -10, 10, 0;
+  plane.F.resize(2, 3);
+  plane.F << 0, 1, 2, 0, 2, 3;
+  h.V.resize(n * n, 3);
+  h.N.resize(n * n, 3);
+  h.UV.resize(n * n, 2);
+  const double tilt = 20.0 * M_PI / 180.0;
+  int left = 0;
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      const int i = y * n + x;
+      const double u = (x + 0.25) / n, v = (y + 0.5) / n;
+      h.V.row(i) << -5 + x, -5 + y, 0.1;
+      h.UV.row(i) << u, v;
+      const bool in = u < 0.5;
+      left += in;
+      // Pointing into the surface (-z), as the ray along the normal must hit it.
+      h.N.row(i) << (in ? std::sin(tilt) : 0.0), 0.0, -(in ? std::cos(tilt) : 1.0);
+    }
+  h.F.resize(0, 3);
+  const RayCaster caster(plane);
+  cv::Mat region = cv::Mat::zeros(64, 64, CV_8U);
+  region(cv::Rect(0, 0, 32, 64)).setTo(1);
+  const SurfaceError e = MeasureSurface(h, caster, 5.0, region);
+  EXPECT_EQ(e.samples, n * n);
+  EXPECT_EQ(e.wrinkle_samples, left);
+  EXPECT_NEAR(e.wrinkle_normal_deg, 20.0, 1e-3);
+  EXPECT_NEAR(e.normal_deg, 20.0 * left / (n * n), 1e-3);
+  // Along the normal: 0.1 mm straight down, 0.1 / cos 20° along a tilted one.
+  EXPECT_NEAR(e.wrinkle_distance_mm, 0.1 / std::cos(tilt), 1e-5);
+  EXPECT_NEAR(e.distance_mm, (left * 0.1 / std::cos(tilt) + (n * n - left) * 0.1) / (n * n), 1e-5);
+  EXPECT_EQ(MeasureSurface(h, caster, 5.0, cv::Mat()).wrinkle_samples, 0);
 }
 
 }  // namespace

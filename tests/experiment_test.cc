@@ -88,6 +88,9 @@ int FakeExecute(const std::vector<std::string>& argv, const fs::path& log) {
     } else {
       WriteJsonFile(report / "report.json", json{{"pca_energy", {0.5, 0.8, 0.9, 1.0}}, {"seconds", 1.5 + h}});
     }
+  } else if (argv[0] == "model" && argv[1] == "loao") {
+    WriteJsonFile(OutputAfter(argv, "--json"),
+                  json{{"mean", {{"held_out", {{"ferns", {{"correlation", 0.3 + 0.1 * h}}}}}}}});
   } else if (argv[0] == "eval") {
     const fs::path out = OutputAfter(argv, "-o");
     std::ofstream(out / "error_vectors.png") << "png";
@@ -265,6 +268,85 @@ TEST(Experiment, CacheKeysChangeExactlyWithTheirInputs) {
   explicit_default.sections["training"]["fern_depth"] = training_defaults.at("fern_depth").get<int>() + 1;
   const auto e1 = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, "1"));
   EXPECT_NE(a.at("model"), e1.at("model"));
+}
+
+const char* kLadder = R"(
+name: ladder
+dataset: {leave_one_actor_out: true, test_actors: 1}
+variants:
+  rung:
+    R0b: {training.training_targets: truth, dataset.capture: false}
+    R1: {dataset.landmarks: ground-truth-fit, dataset.patch_sites: truth}
+    R3: {dataset.landmarks: regressor}
+  size:
+    small: {studio.width: 320, studio.height: 240}
+    big: {studio.width: 1280, studio.height: 720, dataset.scan_size: 1280x720}
+sweep:
+  mode: grid
+  values:
+    size: [small, big]
+    rung: [R0b, R1, R3]
+)";
+
+const ExperimentStage* FindStage(const std::vector<ExperimentStage>& stages, const std::string& kind) {
+  for (const auto& s : stages)
+    if (s.kind == kind) return &s;
+  return nullptr;
+}
+
+TEST(Experiment, VariantsSweepBundlesOfSettingsAndTheLadderPlansItsRungs) {
+  const auto runs = ExpandRuns(ParseExperimentConfig(kLadder, "ladder.yaml"));
+  ASSERT_EQ(runs.size(), 6u);
+  EXPECT_EQ(runs[0].id, "size=small_rung=R0b_seed1");
+  EXPECT_EQ(runs[0].point.at("rung"), "R0b");
+  EXPECT_EQ(runs[4].resolved.sections.at("studio").at("width"), 1280);
+  EXPECT_EQ(runs[4].resolved.sections.at("dataset").at("patch_sites"), "truth");
+  EXPECT_EQ(runs[4].resolved.sections.at("dataset").at("scan_size"), "1280x720");
+  const fs::path cache = "/tmp/cache";
+  // R0b: the pairs with the wrinkle layer as targets, the loao stage, no capture.
+  const auto r0 = PlanRunStages(runs[0], cache, "1");
+  ASSERT_NE(FindStage(r0, "loao"), nullptr);
+  EXPECT_EQ(FindStage(r0, "loao")->depends, std::vector<std::string>{FindStage(r0, "pairs")->key});
+  EXPECT_EQ(FindStage(r0, "capture"), nullptr);
+  // R1: the truth maps of the wrinkle frames feed the capture's wrinkle map.
+  const auto r1 = PlanRunStages(runs[1], cache, "1");
+  const ExperimentStage* maps = FindStage(r1, "truth-maps");
+  ASSERT_NE(maps, nullptr);
+  const ExperimentStage* capture = FindStage(r1, "capture");
+  ASSERT_NE(capture, nullptr);
+  EXPECT_NE(std::find(capture->depends.begin(), capture->depends.end(), maps->key), capture->depends.end());
+  const std::string wrinkle_maps = "wrinkle_map_from_maps=" + (maps->dir / "maps").string();
+  EXPECT_NE(std::find(capture->argv.begin(), capture->argv.end(), wrinkle_maps), capture->argv.end());
+  EXPECT_NE(std::find(capture->argv.begin(), capture->argv.end(), "--ground-truth-fit"), capture->argv.end());
+  // R3: the tracker, no truth maps; its loao stage is R1's (same pairs, same options).
+  const auto r3 = PlanRunStages(runs[2], cache, "1");
+  EXPECT_EQ(FindStage(r3, "truth-maps"), nullptr);
+  EXPECT_NE(FindStage(r3, "tracker"), nullptr);
+  EXPECT_EQ(FindStage(r3, "loao")->key, FindStage(r1, "loao")->key);
+  EXPECT_NE(FindStage(r0, "loao")->key, FindStage(r1, "loao")->key);
+  // The big size renders the scans at its size too: other scans than the small one's.
+  const auto big = PlanRunStages(runs[4], cache, "1");
+  EXPECT_NE(FindStage(big, "scans")->key, FindStage(r1, "scans")->key);
+  const auto& scan_argv = FindStage(big, "scans")->argv;
+  EXPECT_NE(std::find(scan_argv.begin(), scan_argv.end(), "1280x720"), scan_argv.end());
+  // Run through the runner: the loao stage's means reach every run of its pairs as
+  // r0.*, and the experiment records its variants.
+  const fs::path root = TempDir("ladder");
+  ExperimentRunnerOptions o;
+  o.out = root / "out";
+  o.cache = root / "cache";
+  o.program_version = "1";
+  const ExperimentSummary sum = RunExperiment(ParseExperimentConfig(kLadder, "ladder.yaml"), o, FakeExecute);
+  EXPECT_EQ(sum.runs_ok, 6);
+  const json run = ReadJsonFile(o.out / "runs" / "size=small_rung=R1_seed1.json");
+  EXPECT_TRUE(run.at("metrics").contains("r0.held_out.ferns.correlation")) << run.dump();
+  EXPECT_EQ(ReadJsonFile(o.out / "experiment.json").at("variants").at("rung").size(), 3u);
+  fs::remove_all(root);
+  // A label the group lacks, or a variant setting that is not an option, is an error.
+  ExpectErrorNaming(std::string(kLadder) + "profiles: {quick: {sweep: {rung: [R9]}}}\n", "R9");
+  std::string bad = kLadder;
+  bad.replace(bad.find("studio.width: 320"), 17, "studio.wdth: 320");
+  ExpectErrorNaming(bad, "wdth");
 }
 
 json RunJsonWithoutTimes(const fs::path& file) {

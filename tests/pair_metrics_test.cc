@@ -9,6 +9,8 @@
 
 #include "core/error.h"
 #include "core/rng.h"
+#include "pipeline/training/trainer.h"
+#include <nlohmann/json.hpp>
 #include "pipeline/training/fern_cascade.h"
 #include "pipeline/training/pca.h"
 
@@ -89,6 +91,90 @@ TEST(PairMetrics, PairFilesJoinWhenTheirExtractionAgrees) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("c.cpr"), std::string::npos) << e.what();
   }
+  std::filesystem::remove_all(dir);
+}
+
+// Pair sets of `actors` actors of `per_actor` ramp pairs each; actor `flipped` (if
+// ≥ 0) has the opposite relation between texture and displacement.
+TrainingPairs ActorPairs(int actors, int per_actor, int flipped) {
+  TrainingPairs all;
+  all.options_json = "{}";
+  all.texture.resize(actors * per_actor, kN);
+  all.displacement.resize(actors * per_actor, kN);
+  for (int a = 0; a < actors; ++a) {
+    const TrainingPairs p = RampPairs(per_actor, 10 + a);
+    all.texture.middleRows(a * per_actor, per_actor) = p.texture;
+    all.displacement.middleRows(a * per_actor, per_actor) = (a == flipped ? -1.0f : 1.0f) * p.displacement;
+    all.actor.insert(all.actor.end(), per_actor, a);
+    all.actor_names.push_back("actor_" + std::to_string(a));
+  }
+  all.actors = actors;
+  return all;
+}
+
+TrainingOptions SmallRegression() {
+  TrainingOptions o;
+  o.patch.patch_size = kW;
+  o.pca.dimensions = 4;
+  o.ferns.num_ferns = 200;
+  o.ferns.num_sampled_pixels = 12;
+  o.ferns.shrinkage = 5;
+  return o;
+}
+
+TEST(PairMetrics, LeaveOneActorOutScoresEachActorOnAModelThatNeverSawIt) {
+  // Three actors with the same relation: every held-out actor is predicted.
+  const LeaveOneActorOutResult same =
+      EvaluateLeaveOneActorOut(ActorPairs(3, 300, -1), SmallRegression(), {"ferns", "ridge"});
+  ASSERT_EQ(same.folds.size(), 3u);
+  for (const auto& f : same.folds) {
+    EXPECT_EQ(f.training_pairs, 600);
+    ASSERT_EQ(f.held_out.size(), 2u);
+    EXPECT_EQ(f.held_out[0].pairs, 300);
+    EXPECT_EQ(f.held_out[0].regressor, "ferns");
+    EXPECT_EQ(f.held_out[1].regressor, "ridge");
+    EXPECT_GT(f.held_out[0].prediction.correlation, 0.8) << f.actor;
+    EXPECT_GT(f.held_out[1].prediction.correlation, 0.8) << f.actor;
+    EXPECT_GT(f.seen.prediction.correlation, 0.8) << f.actor;
+  }
+  // The third actor's displacements are the negative of the others': held out, it
+  // is predicted with the others' relation (negative correlation), which it would
+  // not be if its own pairs had leaked into its fold's training.
+  const LeaveOneActorOutResult flipped =
+      EvaluateLeaveOneActorOut(ActorPairs(3, 300, 2), SmallRegression(), {"ferns"});
+  ASSERT_EQ(flipped.folds.size(), 3u);
+  EXPECT_EQ(flipped.folds[2].actor, "actor_2");
+  EXPECT_LT(flipped.folds[2].held_out[0].prediction.correlation, -0.5);
+  const nlohmann::json j = nlohmann::json::parse(flipped.ToJson());
+  EXPECT_NEAR(j["mean"]["held_out"]["ferns"]["correlation_min"].get<double>(),
+              flipped.folds[2].held_out[0].prediction.correlation, 1e-9);
+  // Pairs without actor ids (files before 0.4.1) or of one actor cannot be split.
+  TrainingPairs anonymous = ActorPairs(3, 50, -1);
+  anonymous.actor.clear();
+  EXPECT_THROW(EvaluateLeaveOneActorOut(anonymous, SmallRegression(), {"ferns"}, "old.cpr"), Error);
+  EXPECT_THROW(EvaluateLeaveOneActorOut(ActorPairs(1, 50, -1), SmallRegression(), {"ferns"}), Error);
+  EXPECT_THROW(EvaluateLeaveOneActorOut(ActorPairs(3, 50, -1), SmallRegression(), {"lasso"}), Error);
+}
+
+TEST(PairMetrics, ActorIdsSurviveFilesJoinsAndRowSelections) {
+  const auto dir = std::filesystem::path(::testing::TempDir()) / ("pair_actors_" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  const TrainingPairs a = ActorPairs(2, 4, -1), b = ActorPairs(3, 2, -1);
+  WriteTrainingPairs(dir / "a.cpr", a);
+  WriteTrainingPairs(dir / "b.cpr", b);
+  const TrainingPairs read = ReadTrainingPairs(dir / "a.cpr");
+  EXPECT_EQ(read.actor, a.actor);
+  EXPECT_EQ(read.actor_names, a.actor_names);
+  const TrainingPairs ab = ReadTrainingPairs(std::vector<std::filesystem::path>{dir / "a.cpr", dir / "b.cpr"});
+  ASSERT_EQ(ab.actor.size(), 14u);
+  EXPECT_EQ(ab.actor_names.size(), 5u);
+  EXPECT_EQ(ab.actor[8], 2);   // b's first actor follows a's two
+  EXPECT_EQ(ab.actor[13], 4);
+  const TrainingPairs rows = ab.Rows({13, 0});
+  EXPECT_EQ(rows.actor, (std::vector<int32_t>{4, 0}));
+  EXPECT_EQ(rows.actors, 2);
+  EXPECT_EQ(rows.texture.row(0), ab.texture.row(13));
+  EXPECT_EQ(rows.displacement.row(1), ab.displacement.row(0));
   std::filesystem::remove_all(dir);
 }
 

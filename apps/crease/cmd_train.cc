@@ -134,6 +134,23 @@ void AddTrainCommands(CLI::App& app) {
     });
   }
   {
+    auto* cmd = app.add_subcommand("truth-maps",
+                                   "The true detail D* (Sec. 4.1, eval/detail_truth.h) of a studio sequence's frames, "
+                                   "with a model's G: the maps `capture --set wrinkle_map_from_maps=DIR` reads");
+    static std::string dataset, model_path, out;
+    static int frames = -1;
+    cmd->add_option("--dataset,-d", dataset, "Sequence folder from `crease synth sequence`")->required();
+    cmd->add_option("--model,-m", model_path, "Detail model (.cdm): its G and map resolution")->required();
+    cmd->add_option("--frames", frames, "The first N frames only (-1 = all)")->capture_default_str();
+    cmd->add_option("--out,-o", out, "Folder to write NNNNNN.exr into (replaced)")->required();
+    cmd->callback([] {
+      const DetailModel model = ReadDetailModel(model_path);
+      const int n = WriteDetailTruthMaps(dataset, model.detail, frames, out);
+      std::printf("wrote %d maps of D* (%d x %d) to %s\n", n, model.detail.map_resolution, model.detail.map_resolution,
+                  out.c_str());
+    });
+  }
+  {
     auto* model_cmd = app.add_subcommand("model", "Inspect trained models");
     model_cmd->require_subcommand(1);
     auto* cmd = model_cmd->add_subcommand("info", "Describe a detail model file");
@@ -152,6 +169,28 @@ void AddTrainCommands(CLI::App& app) {
           EvaluatePairs(ReadDetailModel(eval_model), ReadTrainingPairs(PairFiles(eval_pairs)), eval_pairs);
       std::printf("%s", m.ToTable().c_str());
       if (!eval_json.empty()) WriteFileAtomic(eval_json, [&](std::ostream& out) { out << m.ToJson() << "\n"; });
+    });
+    auto* loao_cmd = model_cmd->add_subcommand(
+        "loao", "Leave one actor out (issue 17's rung R0): train on all actors' pairs but one, score the held-out one");
+    static std::string loao_pairs, loao_json, loao_config, loao_regressors = "ferns,ridge,nearest";
+    static std::vector<std::string> loao_sets;
+    loao_cmd->add_option("--pairs", loao_pairs, "Pair files (from `crease train --save-pairs`), comma-separated")
+        ->required();
+    loao_cmd->add_option("--regressors", loao_regressors, "Regressors scored, comma-separated: ferns, ridge, nearest")
+        ->capture_default_str();
+    loao_cmd->add_option("--config", loao_config, "Training options (YAML; only PCA and cascade options may differ)");
+    loao_cmd->add_option("--set", loao_sets, "Training option KEY=VALUE (repeatable), e.g. num_ferns=640");
+    loao_cmd->add_option("--json", loao_json, "Write the folds and their means as JSON");
+    loao_cmd->callback([] {
+      const TrainingPairs pairs = ReadTrainingPairs(PairFiles(loao_pairs));
+      const TrainingOptions options = OptionsForPairs(pairs, loao_pairs, [](TrainingOptions* o) {
+        if (!loao_config.empty()) SetOptionsFromYaml(ReadFileToString(loao_config), loao_config, o);
+        if (!loao_sets.empty()) SetOptionsFromJson(SetPairsToJson(loao_sets), "--set", o);
+      });
+      const LeaveOneActorOutResult r = EvaluateLeaveOneActorOut(
+          pairs, options, SplitComma(loao_regressors), loao_pairs, [](const std::string& l) { std::printf("  %s\n", l.c_str()); });
+      std::printf("%s", r.ToTable().c_str());
+      if (!loao_json.empty()) WriteFileAtomic(loao_json, [&](std::ostream& out) { out << r.ToJson() << "\n"; });
     });
   }
 }

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include "core/array_file.h"
@@ -251,6 +252,7 @@ TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const
   if (options.max_actors > 0 && static_cast<int>(actors.size()) > options.max_actors) actors.resize(options.max_actors);
 
   std::vector<Eigen::MatrixXf> texture_patches, displacement_patches;
+  std::vector<int32_t> actor_of_rows;
   int total_pairs = 0;
   int64_t steps = 0;  // every scan
   for (const auto& a : actors) steps += static_cast<int64_t>(a.scans.size());
@@ -428,6 +430,7 @@ TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const
                  DrawPatchLayout(wmap.probability, layout, wmap.valid), {.srgb = false});
     }
     if (pairs.size() > 0) {
+      actor_of_rows.insert(actor_of_rows.end(), static_cast<size_t>(pairs.size()), static_cast<int32_t>(a));
       texture_patches.push_back(std::move(pairs.texture));
       displacement_patches.push_back(std::move(pairs.displacement));
     }
@@ -455,7 +458,11 @@ TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const
   out.options_json = OptionsToJson(options);
   out.scan_set = set.root.string();
   out.actors = static_cast<int>(sum.actors.size());
-  for (const auto& a : sum.actors) out.scans += a.scans;
+  for (const auto& a : sum.actors) {
+    out.scans += a.scans;
+    out.actor_names.push_back(a.name);
+  }
+  out.actor = std::move(actor_of_rows);
   out.seconds = Since(start);
   sum.seconds = out.seconds;
   return out;
@@ -596,12 +603,14 @@ void WriteTrainingPairs(const fs::path& path, const TrainingPairs& pairs) {
   header["actors"] = pairs.actors;
   header["scans"] = pairs.scans;
   header["seconds"] = pairs.seconds;
+  header["actor_names"] = pairs.actor_names;
   ArrayFileWriter w(header.dump());
   // Row-major N × w² (Eigen stores column-major: transpose into a row-major copy).
   using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   const RowMajor t = pairs.texture, d = pairs.displacement;
   w.Add("texture", t.data(), {t.rows(), t.cols()});
   w.Add("displacement", d.data(), {d.rows(), d.cols()});
+  if (!pairs.actor.empty()) w.Add("actor", pairs.actor.data(), {static_cast<int64_t>(pairs.actor.size())});
   w.Write(path, kPairsMagic, kPairsVersion);
 }
 
@@ -617,6 +626,7 @@ TrainingPairs ReadTrainingPairs(const fs::path& path) {
     p.actors = header.value("actors", 0);
     p.scans = header.value("scans", 0);
     p.seconds = header.value("seconds", 0.0);
+    p.actor_names = header.value("actor_names", std::vector<std::string>{});
   } catch (const json::exception& e) {
     throw Error(fmt::format("{}: malformed header: {}", what, e.what()));
   }
@@ -634,7 +644,36 @@ TrainingPairs ReadTrainingPairs(const fs::path& path) {
   Require(p.texture.rows() == p.displacement.rows() && p.texture.cols() == p.displacement.cols(),
           fmt::format("{}: texture ({}×{}) and displacement ({}×{}) patches differ in shape", what, p.texture.rows(),
                       p.texture.cols(), p.displacement.rows(), p.displacement.cols()));
+  if (f.arrays.count("actor")) {
+    p.actor = f.Get<int32_t>("actor", p.texture.rows(), what);
+    for (int32_t a : p.actor)
+      Require(a >= 0 && a < static_cast<int32_t>(p.actor_names.size()),
+              fmt::format("{}: array 'actor' holds {}, the header names {} actors", what, a, p.actor_names.size()));
+  }
   return p;
+}
+
+TrainingPairs TrainingPairs::Rows(const std::vector<int>& rows) const {
+  TrainingPairs out;
+  out.options_json = options_json;
+  out.scan_set = scan_set;
+  out.actor_names = actor_names;
+  out.texture.resize(static_cast<Eigen::Index>(rows.size()), texture.cols());
+  out.displacement.resize(static_cast<Eigen::Index>(rows.size()), displacement.cols());
+  std::set<int32_t> seen;
+  for (size_t k = 0; k < rows.size(); ++k) {
+    const int r = rows[k];
+    Require(r >= 0 && r < texture.rows(), fmt::format("TrainingPairs::Rows: row {} of {}", r, texture.rows()));
+    out.texture.row(static_cast<Eigen::Index>(k)) = texture.row(r);
+    out.displacement.row(static_cast<Eigen::Index>(k)) = displacement.row(r);
+    if (!actor.empty()) {
+      out.actor.push_back(actor[r]);
+      seen.insert(actor[r]);
+    }
+  }
+  out.actors = actor.empty() ? actors : static_cast<int>(seen.size());
+  out.scans = scans;
+  return out;
 }
 
 TrainingPairs ReadTrainingPairs(const std::vector<fs::path>& paths) {
@@ -652,6 +691,14 @@ TrainingPairs ReadTrainingPairs(const std::vector<fs::path>& paths) {
     all.displacement.conservativeResize(n + p.displacement.rows(), Eigen::NoChange);
     all.displacement.bottomRows(p.displacement.rows()) = p.displacement;
     all.scan_set += ", " + p.scan_set;
+    if (all.actor.empty() != p.actor.empty()) {  // one file without actor ids: none for the join
+      all.actor.clear();
+      all.actor_names.clear();
+    } else {
+      const auto offset = static_cast<int32_t>(all.actor_names.size());
+      for (int32_t a : p.actor) all.actor.push_back(a + offset);
+      all.actor_names.insert(all.actor_names.end(), p.actor_names.begin(), p.actor_names.end());
+    }
     all.actors += p.actors;
     all.scans += p.scans;
     all.seconds += p.seconds;

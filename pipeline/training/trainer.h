@@ -17,6 +17,7 @@
 // illumination limitation (Sec. 7, Fig. 14).
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -130,6 +131,13 @@ struct TrainingPairs {
   std::string scan_set;          // the scan set's folder
   int actors = 0, scans = 0;
   double seconds = 0.0;          // extraction time
+  // The actor of each row (N indices into actor_names), for leave-one-actor-out
+  // tests (issue 17's rung R0). Empty in pair files written before crease 0.4.1.
+  std::vector<int32_t> actor;
+  std::vector<std::string> actor_names;
+
+  // The rows `rows` (in that order) as a pair set of their own (same options).
+  TrainingPairs Rows(const std::vector<int>& rows) const;
 };
 
 // Sec. 4.1–4.2 only: scans → pairs (fills the summary's actors, accuracy, timing).
@@ -153,7 +161,8 @@ TrainingOptions OptionsForPairs(const TrainingPairs& pairs, const std::string& w
                                 const std::function<void(TrainingOptions*)>& edit);
 
 // CREASPRS v1 (core/array_file.h): header {options, scan_set, actors, scans,
-// seconds}, arrays texture and displacement (f32, N × w², row-major).
+// seconds, actor_names}, arrays texture and displacement (f32, N × w², row-major)
+// and actor (i32, N; optional: files before crease 0.4.1 lack it).
 void WriteTrainingPairs(const std::filesystem::path& path, const TrainingPairs& pairs);
 TrainingPairs ReadTrainingPairs(const std::filesystem::path& path);
 // Several pair files as one set (e.g. all actors but one, for a leave-one-actor-out
