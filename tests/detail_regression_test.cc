@@ -260,6 +260,41 @@ TEST(DetailRegression, GateLeavesAFrameWithoutLinesFlat) {
   EXPECT_GT(Correlation(D, truth, Chart()), 0.5);
 }
 
+// A static dark stripe (a brow painted in the albedo) in every frame, beside the
+// lines that come and go: read raw, the wrinkle map puts patches on it; flattened by
+// the median of the wrinkle frames (texture_reference = neutral, Difference 6) it
+// cancels, and the lines still make patches and grooves.
+TEST(DetailRegression, AReferenceTextureCancelsStaticFeaturesButKeepsWrinkles) {
+  auto frame = [](double depth, cv::Mat* t, cv::Mat* d) {
+    Frame(depth, t, d);
+    (*t)(cv::Rect(34, 18, 60, 5)) -= 0.25f;
+  };
+  auto near_stripe = [](const DetailRegressor& r) {
+    int n = 0;
+    for (const auto& p : r.layout().patches) n += std::abs(p.center_texel.y() - 20.0f) < 6.0f;
+    return n;
+  };
+  DetailModel flat_model = TinyModel();
+  flat_model.wrinkle.texture_reference = "neutral";
+  DetailRegressionOptions o = SmallOptions();
+  o.wrinkle_frames = 5;
+  DetailRegressor raw(TinyModel(), {}, Chart(), o), flat(flat_model, {}, Chart(), o);
+  for (double depth : {0.0, 0.2, 0.0, 0.15, 0.0}) {
+    cv::Mat t, d;
+    frame(depth, &t, &d);
+    raw.AddWrinkleFrame(t, cv::Mat());
+    flat.AddWrinkleFrame(t, cv::Mat());
+  }
+  raw.FixLayout();
+  flat.FixLayout();
+  EXPECT_GT(near_stripe(raw), 0);
+  EXPECT_EQ(near_stripe(flat), 0);
+  ASSERT_GT(flat.layout().num_patches(), 3);
+  cv::Mat t, truth;
+  frame(0.18, &t, &truth);
+  EXPECT_GT(Correlation(flat.Regress(t, cv::Mat()), truth, Chart()), 0.5);
+}
+
 TEST(DetailRegression, WrinkleMapIgnoresOcclusionBorders) {
   // Frames with no lines; in two of them one half of the chart is unseen (0 in T^t).
   // Every texel is seen in at least 3 of 4 frames, so only the extension of the seen

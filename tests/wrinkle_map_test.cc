@@ -270,6 +270,35 @@ TEST(WrinkleMapTest, BuilderAddsFramesOneByOne) {
   EXPECT_EQ(builder.Finish().num_textures, 4);
 }
 
+TEST(WrinkleMapTest, FlatteningByAReferenceCancelsAlbedoAndKeepsShading) {
+  // T = albedo · shading; the reference has the same albedo and shading 1.
+  cv::Mat albedo(8, 8, CV_32F), shading(8, 8, CV_32F, cv::Scalar(1.0f));
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 8; ++x) albedo.at<float>(y, x) = 0.1f + 0.05f * x;  // a brow-to-skin ramp
+  shading.row(3).setTo(0.5f);                                              // a wrinkle's shadow
+  const cv::Mat T = albedo.mul(shading), ref = albedo.clone();
+  cv::Mat coverage(8, 8, CV_8U, cv::Scalar(255));
+  coverage.at<uint8_t>(0, 0) = 0;
+  const cv::Mat F = FlattenByReference(T, ref, coverage);
+  const double m = cv::mean(ref, coverage)[0];
+  EXPECT_EQ(F.at<float>(0, 0), 0.0f);  // outside the coverage
+  EXPECT_NEAR(F.at<float>(2, 5), m, 1e-6);
+  EXPECT_NEAR(F.at<float>(3, 1), 0.5 * m, 1e-6);
+  EXPECT_NEAR(F.at<float>(3, 7), 0.5 * m, 1e-6);
+  EXPECT_NEAR(FlattenByReference(T, ref, coverage, 2.0).at<float>(3, 2), 1.0, 1e-6);
+  // The median of the frames that saw each texel.
+  std::vector<cv::Mat> frames = {cv::Mat(2, 2, CV_32F, cv::Scalar(1.0f)), cv::Mat(2, 2, CV_32F, cv::Scalar(5.0f)),
+                                 cv::Mat(2, 2, CV_32F, cv::Scalar(3.0f))};
+  std::vector<cv::Mat> seen = {cv::Mat(2, 2, CV_8U, cv::Scalar(1)), cv::Mat(2, 2, CV_8U, cv::Scalar(1)),
+                               cv::Mat(2, 2, CV_8U, cv::Scalar(1))};
+  seen[2].at<uint8_t>(1, 1) = 0;
+  const cv::Mat med = MedianTexture(frames, seen);
+  EXPECT_EQ(med.at<float>(0, 0), 3.0f);
+  EXPECT_EQ(med.at<float>(1, 1), 5.0f);  // upper median of {1, 5}
+  EXPECT_THROW(FlattenByReference(T, cv::Mat(4, 4, CV_32F), cv::Mat()), Error);
+  EXPECT_THROW(MedianTexture({}, {}), Error);
+}
+
 TEST(WrinkleMapTest, Errors) {
   const WrinkleMapOptions o = TexelOptions();
   const cv::Mat t(64, 64, CV_32F, cv::Scalar(0.5));

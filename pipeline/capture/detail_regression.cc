@@ -83,6 +83,23 @@ struct DetailRegressor::Impl {
   std::vector<int32_t> share_texel;
   std::vector<float> share_value;
   std::vector<float> taps_small, taps_large;  // DoG gate kernels (1D)
+  // Difference 6 (model.wrinkle.texture_reference = neutral): the wrinkle frames are
+  // held until FixLayout, whose per-texel median of them is the reference every
+  // texture is flattened by (FlattenByReference) before the map and the patches.
+  std::vector<cv::Mat> held_gray, held_seen;
+  cv::Mat reference;
+  double reference_mean = 0.0;
+
+  bool flattens() const { return model.wrinkle.texture_reference == "neutral"; }
+  // `gray` as the map and the patches read it: flattened after FixLayout in mode
+  // neutral, itself otherwise.
+  cv::Mat Input(const cv::Mat& gray, const cv::Mat& seen) const {
+    if (!flattens()) return gray.isContinuous() ? gray : gray.clone();
+    cv::Mat seen_chart = coverage.clone();
+    if (!seen.empty()) cv::bitwise_and(seen_chart, seen != 0, seen_chart);
+    return FlattenByReference(gray, reference, seen_chart, reference_mean);
+  }
+  void AddToMap(const cv::Mat& gray, const cv::Mat& seen_chart);
 
   void RequireFrame(const cv::Mat& gray, const cv::Mat& seen, const char* what) const {
     Require(!gray.empty(), fmt::format("{}: empty texture", what));
@@ -212,7 +229,6 @@ void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen) 
   Impl& m = *impl_;
   Require(!m.fixed, "DetailRegressor::AddWrinkleFrame: the layout is already fixed (FixLayout was called)");
   m.RequireFrame(gray, seen, "DetailRegressor::AddWrinkleFrame");
-  const int R = m.R;
   // Seen chart texels.
   cv::Mat seen_chart = m.coverage.clone();
   if (!seen.empty()) {
@@ -220,6 +236,20 @@ void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen) 
     cv::compare(seen, 0, s, cv::CMP_NE);
     cv::bitwise_and(seen_chart, s, seen_chart);
   }
+  cv::add(m.seen_count, cv::Scalar(1), m.seen_count, seen_chart);
+  ++m.frames;
+  if (m.flattens()) {  // the map waits for the reference (FixLayout)
+    m.held_gray.push_back(gray.clone());
+    m.held_seen.push_back(seen_chart);
+    return;
+  }
+  m.AddToMap(gray, seen_chart);
+}
+
+// The wrinkle map's share of one frame (Sec. 5.2), unseen chart texels extended
+// smoothly from the seen ones.
+void DetailRegressor::Impl::AddToMap(const cv::Mat& gray, const cv::Mat& seen_chart) {
+  Impl& m = *this;
   cv::Mat texture = gray;
   const int unseen = cv::countNonZero(m.coverage) - cv::countNonZero(seen_chart);
   if (unseen > 0) {
@@ -251,8 +281,6 @@ void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen) 
     texture = clean;
   }
   m.builder->Add(texture, fmt::format("DetailRegressor::AddWrinkleFrame: frame {}", m.frames));
-  cv::add(m.seen_count, cv::Scalar(1), m.seen_count, seen_chart);
-  ++m.frames;
 }
 
 bool DetailRegressor::NeedsWrinkleFrames() const {
@@ -265,6 +293,16 @@ void DetailRegressor::FixLayout() {
   Require(m.frames > 0, "DetailRegressor::FixLayout: no wrinkle frames were added (call AddWrinkleFrame with the "
                         "first N frames' textures first, Sec. 5.2)");
   const int R = m.R;
+  if (m.flattens()) {
+    m.reference = MedianTexture(m.held_gray, m.held_seen);
+    cv::Mat usable = m.coverage.clone();
+    cv::bitwise_and(usable, m.reference > 1e-4f, usable);
+    m.reference_mean = cv::countNonZero(usable) > 0 ? cv::mean(m.reference, usable)[0] : 0.0;
+    for (size_t k = 0; k < m.held_gray.size(); ++k)
+      m.AddToMap(FlattenByReference(m.held_gray[k], m.reference, m.held_seen[k], m.reference_mean), m.held_seen[k]);
+    m.held_gray.clear();
+    m.held_seen.clear();
+  }
   m.wmap = m.builder->Finish();
   // W(p) = Σ_j [r_j > α] r_j / J_p, 0 where J_p < min fraction · J (header).
   const double min_seen = std::max(1.0, m.options.wrinkle_min_seen_fraction * m.frames);
@@ -374,7 +412,7 @@ cv::Mat DetailRegressor::Regress(const cv::Mat& gray, const cv::Mat& seen, Detai
 
   // 1. Sample t_i on the fixed layout; which patches drop out this frame.
   auto t0 = Clock::now();
-  const cv::Mat src = gray.isContinuous() ? gray : gray.clone();
+  const cv::Mat src = m.Input(gray, seen);
   Eigen::MatrixXf sampled;  // N × n, column-major (PatchSampler's layout)
   m.sampler->Sample(src, &sampled);
   RowMatrixXf patches = sampled;  // one patch per row, for RegressBatch
@@ -449,7 +487,7 @@ std::vector<uint8_t> DetailRegressor::DroppedPatches(const cv::Mat& gray, const 
   Require(m.fixed, "DetailRegressor::DroppedPatches: the layout is not fixed yet");
   m.RequireFrame(gray, seen, "DetailRegressor::DroppedPatches");
   if (m.layout.num_patches() == 0) return {};
-  return m.Drops(gray.isContinuous() ? gray : gray.clone(), seen);
+  return m.Drops(m.Input(gray, seen), seen);
 }
 
 const WrinkleMap& DetailRegressor::wrinkle_map() const {

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 #include <fstream>
+#include <map>
 #include <set>
 #include <sstream>
 
@@ -232,6 +233,26 @@ std::string TrainingSummary::ToMarkdown() const {
   return s;
 }
 
+namespace {
+
+// Difference 6 (WrinkleMapOptions::texture_reference = neutral): each texture
+// flattened by the neutral scan's texture under the same light (the first texture
+// of each light: the neutral scan comes first).
+void FlattenByNeutral(const std::vector<std::string>& lights, const std::vector<cv::Mat>& coverage,
+                      std::vector<cv::Mat>* textures) {
+  std::map<std::string, size_t> neutral;
+  for (size_t t = 0; t < textures->size(); ++t) neutral.emplace(lights[t], t);
+  std::map<std::string, cv::Mat> reference;
+  for (const auto& [light, t] : neutral) reference[light] = (*textures)[t].clone();
+  for (size_t t = 0; t < textures->size(); ++t) {
+    cv::Mat seen;
+    cv::bitwise_and(coverage[t], coverage[neutral[lights[t]]], seen);
+    (*textures)[t] = FlattenByReference((*textures)[t], reference[lights[t]], seen);
+  }
+}
+
+}  // namespace
+
 TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const TrainingOptions& options,
                                    const TrainingOutputs& outputs, TrainingSummary* summary,
                                    const std::function<void(const std::string&)>& log_fn) {
@@ -311,7 +332,7 @@ TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const
     const cv::Mat neutral_truth =
         neutral_scan.truth_displacement.empty() ? cv::Mat() : ReadTruth(neutral_scan.truth_displacement, R);
     std::vector<cv::Mat> gray_textures, texture_displacements, texture_coverage;
-    std::vector<std::string> texture_names;
+    std::vector<std::string> texture_names, texture_light;
     for (size_t j = 0; j < meshes.size(); ++j) {
       const ScanEntry& scan = actor.scans[order[j]];
       t0 = Clock::now();
@@ -386,6 +407,7 @@ TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const
         if (cams.empty()) continue;
         const ExtractedTexture tex = ExtractTexture(meshes[j], raster, &caster, cams, images, options.texture);
         gray_textures.push_back(tex.gray);
+        texture_light.push_back(light);
         texture_coverage.push_back(tex.seen);
         texture_displacements.push_back(D[j]);
         texture_names.push_back(fmt::format("{}/{}/{}", actor.name, scan.name, light));
@@ -408,6 +430,7 @@ TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const
                                                 fmt::join(lights, ", ")));
     // --- Sec. 4.2: wrinkle map, patch layout, training pairs.
     t0 = Clock::now();
+    if (options.wrinkle.texture_reference == "neutral") FlattenByNeutral(texture_light, texture_coverage, &gray_textures);
     cv::Mat coverage = extractor.coverage().clone();
     for (const auto& c : texture_coverage) cv::bitwise_and(coverage, c, coverage);
     WrinkleMapBuilder builder(R, coverage, rig.regions, options.wrinkle);

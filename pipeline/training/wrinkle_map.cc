@@ -26,6 +26,7 @@ void WrinkleMapOptions::VisitFields(OptionVisitor& v) {
   v.Field("patch_exclude_margin", patch_exclude_margin);
   v.Field("orientation_gradient_sigma", orientation_gradient_sigma);
   v.Field("orientation_smoothing_sigma", orientation_smoothing_sigma);
+  v.Field("texture_reference", texture_reference);
 }
 
 void WrinkleMapOptions::Check() const {
@@ -41,6 +42,7 @@ void WrinkleMapOptions::Check() const {
   CheckGe(o, "patch_exclude_margin", patch_exclude_margin, 0.0);
   CheckLe(o, "patch_exclude_margin", patch_exclude_margin, 1000.0);
   CheckLe(o, "orientation_smoothing_sigma", orientation_smoothing_sigma, 1000.0);
+  CheckOneOf(o, "texture_reference", texture_reference, {"none", "neutral"});
   for (size_t k = 0; k < patch_regions.size(); ++k) {
     Require(!patch_regions[k].empty(),
             fmt::format("WrinkleMapOptions.patch_regions[{}] is empty; expected a region name", k));
@@ -240,6 +242,66 @@ cv::Mat DogResponse(const cv::Mat& gray_texture, const WrinkleMapOptions& option
   RequireGray(gray_texture, what);
   const DogFilter filter(PrepareCoverage(coverage, gray_texture.rows, what), options);
   return filter.Response(filter.Masked(gray_texture, what));
+}
+
+cv::Mat FlattenByReference(const cv::Mat& texture, const cv::Mat& reference, const cv::Mat& coverage,
+                           double reference_mean) {
+  RequireGray(texture, "FlattenByReference texture");
+  RequireGray(reference, "FlattenByReference reference");
+  Require(texture.size() == reference.size() && (coverage.empty() || coverage.size() == texture.size()),
+          fmt::format("FlattenByReference: texture {}×{}, reference {}×{}, coverage {}×{}", texture.cols, texture.rows,
+                      reference.cols, reference.rows, coverage.cols, coverage.rows));
+  constexpr float kMinReference = 1e-4f;
+  auto usable = [&](int y, int x) {
+    return (coverage.empty() || coverage.at<uint8_t>(y, x)) && reference.at<float>(y, x) > kMinReference;
+  };
+  if (reference_mean < 0) {
+    double sum = 0;
+    int64_t n = 0;
+    for (int y = 0; y < reference.rows; ++y)
+      for (int x = 0; x < reference.cols; ++x)
+        if (usable(y, x)) {
+          sum += reference.at<float>(y, x);
+          ++n;
+        }
+    reference_mean = n > 0 ? sum / static_cast<double>(n) : 0.0;
+  }
+  cv::Mat out(texture.size(), CV_32F, cv::Scalar(0));
+  for (int y = 0; y < texture.rows; ++y) {
+    const float* t = texture.ptr<float>(y);
+    const float* r = reference.ptr<float>(y);
+    float* o = out.ptr<float>(y);
+    for (int x = 0; x < texture.cols; ++x)
+      if (usable(y, x) && t[x] > 0.0f) o[x] = static_cast<float>(t[x] * reference_mean / r[x]);
+  }
+  return out;
+}
+
+cv::Mat MedianTexture(const std::vector<cv::Mat>& textures, const std::vector<cv::Mat>& seen) {
+  Require(!textures.empty(), "MedianTexture: no textures");
+  Require(seen.empty() || seen.size() == textures.size(),
+          fmt::format("MedianTexture: {} textures and {} seen masks", textures.size(), seen.size()));
+  for (size_t k = 0; k < textures.size(); ++k) {
+    RequireGray(textures[k], fmt::format("MedianTexture texture {}", k));
+    Require(textures[k].size() == textures[0].size() && (seen.empty() || seen[k].empty() || seen[k].size() == textures[0].size()),
+            fmt::format("MedianTexture: texture or mask {} differs in size from the first", k));
+  }
+  cv::Mat out(textures[0].size(), CV_32F, cv::Scalar(0));
+  ForRows(out.rows, [&](int y) {
+    std::vector<float> v;
+    v.reserve(textures.size());
+    float* o = out.ptr<float>(y);
+    for (int x = 0; x < out.cols; ++x) {
+      v.clear();
+      for (size_t k = 0; k < textures.size(); ++k)
+        if (seen.empty() || seen[k].empty() || seen[k].at<uint8_t>(y, x)) v.push_back(textures[k].at<float>(y, x));
+      if (v.empty()) continue;
+      const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+      std::nth_element(v.begin(), mid, v.end());
+      o[x] = *mid;
+    }
+  });
+  return out;
 }
 
 cv::Mat ValidRegionMask(const std::vector<RegionMask>& regions, const std::vector<std::string>& names,

@@ -50,6 +50,17 @@
 //      (quick detail-accuracy, seed 1: 0.062 with them, −0.006 without), so the
 //      default keeps the paper's regions. Regions the rig does not define are
 //      skipped (a rig imported from blendshape OBJs has no brow masks).
+//   6. Optional (texture_reference = neutral; the paper reads T itself): the map and
+//      the patch features read T flattened by a reference texture of the same
+//      person under the same light, T · mean(T_ref) / T_ref. Texture = albedo ×
+//      shading, so the static appearance — brows, lashes, the hairline, lids,
+//      moles, skin tone — cancels and the expression's shading is left. On the
+//      studio's scans the raw map puts most patches on the hair edge, the brows
+//      and the lids (their texture patches are dark hair edges, their displacement
+//      patches unrelated to them); flattened, the patches sit on the lines.
+//      Reference: the actor's neutral scan in training; in capture the per-texel
+//      median of the N wrinkle frames (the user's resting appearance, as long as
+//      each wrinkle shows in fewer than half of them).
 #pragma once
 
 #include <memory>
@@ -98,10 +109,29 @@ struct WrinkleMapOptions {
   // σ_o: Gaussian smoothing of the averaged doubled-angle gradient vectors, texels
   // at dog_reference_resolution (not in the paper; Difference 4). 0 = none.
   double orientation_smoothing_sigma = 3.0;
+  // What the wrinkle map and the patch features read (issue 17; not in the paper,
+  // Difference 6): "none" — the texture T itself (the paper); "neutral" — T
+  // flattened by a reference texture of the same person under the same light,
+  // T · mean(T_ref) / T_ref (FlattenByReference), so the person's static
+  // appearance (brows, lashes, hairline, lids, moles, albedo) cancels and what is
+  // left is the shading the expression changes. The reference is the actor's
+  // neutral scan in training and the per-texel median of the wrinkle frames in
+  // capture (MedianTexture).
+  std::string texture_reference = "none";
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
 };
+
+// Difference 6 (WrinkleMapOptions::texture_reference): T · m / T_ref on the texels
+// where both are seen (T_ref > 1e-4 and `coverage` non-zero; empty = all), 0
+// elsewhere; m = the mean of T_ref over those texels of the reference (pass
+// reference_mean < 0 to compute it). All CV_32FC1 of one size.
+cv::Mat FlattenByReference(const cv::Mat& texture, const cv::Mat& reference, const cv::Mat& coverage,
+                           double reference_mean = -1.0);
+// The per-texel median of `textures` over the frames that saw the texel (`seen`:
+// CV_8U masks, one per texture, or empty = all seen); 0 where none did.
+cv::Mat MedianTexture(const std::vector<cv::Mat>& textures, const std::vector<cv::Mat>& seen);
 
 // Scale of the σ of `options` for a map of `map_size` texels (Difference 1).
 double SigmaScale(const WrinkleMapOptions& options, int map_size);
