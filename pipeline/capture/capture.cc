@@ -157,8 +157,9 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
   }
   if (out.has_mesh) {
     const auto t0 = std::chrono::steady_clock::now();
+    const double expression = out.tracked.fit.expression.norm();  // how far from the neutral
     if (options_.wrinkle_map_from_maps.empty()) {
-      detail_->AddWrinkleFrame(out.texture.gray, out.texture.seen);
+      detail_->AddWrinkleFrame(out.texture.gray, out.texture.seen, expression);
     } else {
       const std::filesystem::path p =
           std::filesystem::path(options_.wrinkle_map_from_maps) / fmt::format("{:06d}.exr", out.frame);
@@ -166,7 +167,8 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
               fmt::format("{}: missing (wrinkle_map_from_maps needs a map per wrinkle frame)", p.string()));
       cv::Mat d = ReadImage(p, /*srgb=*/false);
       if (d.channels() > 1) cv::extractChannel(d, d, 0);
-      detail_->AddWrinkleFrame(WrinkleTextureFromDisplacement(d, map_resolution_), out.texture.seen);
+      detail_->AddWrinkleFrame(out.texture.gray, out.texture.seen, expression,
+                               WrinkleTextureFromDisplacement(d, map_resolution_));
     }
     out.timing.wrinkle_map_ms = MsSince(t0);
   }

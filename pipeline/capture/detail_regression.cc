@@ -83,23 +83,42 @@ struct DetailRegressor::Impl {
   std::vector<int32_t> share_texel;
   std::vector<float> share_value;
   std::vector<float> taps_small, taps_large;  // DoG gate kernels (1D)
-  // Difference 6 (model.wrinkle.texture_reference = neutral): the wrinkle frames are
+  // Difference 6 (model.wrinkle.texture_reference ratio or difference): the wrinkle frames are
   // held until FixLayout, whose per-texel median of them is the reference every
   // texture is flattened by (FlattenByReference) before the map and the patches.
-  std::vector<cv::Mat> held_gray, held_seen;
+  std::vector<cv::Mat> held_gray, held_seen, held_map;
+  std::vector<double> held_expression;
   cv::Mat reference;
   double reference_mean = 0.0;
 
-  bool flattens() const { return model.wrinkle.texture_reference == "neutral"; }
+  bool flattens() const { return model.wrinkle.texture_reference != "none"; }
   // `gray` as the map and the patches read it: flattened after FixLayout in mode
-  // neutral, itself otherwise.
+  // ratio or difference, itself otherwise.
   cv::Mat Input(const cv::Mat& gray, const cv::Mat& seen) const {
     if (!flattens()) return gray.isContinuous() ? gray : gray.clone();
     cv::Mat seen_chart = coverage.clone();
     if (!seen.empty()) cv::bitwise_and(seen_chart, seen != 0, seen_chart);
-    return FlattenByReference(gray, reference, seen_chart, reference_mean);
+    return FlattenByReference(gray, reference, seen_chart, model.wrinkle.texture_reference, reference_mean);
   }
   void AddToMap(const cv::Mat& gray, const cv::Mat& seen_chart);
+
+  // Difference 6's capture reference: the per-texel median of the held frames whose
+  // expression is within the smallest quarter (at least one frame).
+  void FixReference() {
+    std::vector<double> sorted = held_expression;
+    std::sort(sorted.begin(), sorted.end());
+    const double limit = sorted[std::max<size_t>(1, sorted.size() / 4) - 1];
+    std::vector<cv::Mat> gray, seen;
+    for (size_t k = 0; k < held_gray.size(); ++k) {
+      if (held_expression[k] > limit) continue;
+      gray.push_back(held_gray[k]);
+      seen.push_back(held_seen[k]);
+    }
+    reference = MedianTexture(gray, seen);
+    cv::Mat usable = coverage.clone();
+    cv::bitwise_and(usable, reference > 1e-4f, usable);
+    reference_mean = cv::countNonZero(usable) > 0 ? cv::mean(reference, usable)[0] : 0.0;
+  }
 
   void RequireFrame(const cv::Mat& gray, const cv::Mat& seen, const char* what) const {
     Require(!gray.empty(), fmt::format("{}: empty texture", what));
@@ -225,7 +244,8 @@ DetailRegressor::~DetailRegressor() = default;
 DetailRegressor::DetailRegressor(DetailRegressor&&) noexcept = default;
 DetailRegressor& DetailRegressor::operator=(DetailRegressor&&) noexcept = default;
 
-void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen) {
+void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen, double expression,
+                                      const cv::Mat& map_texture) {
   Impl& m = *impl_;
   Require(!m.fixed, "DetailRegressor::AddWrinkleFrame: the layout is already fixed (FixLayout was called)");
   m.RequireFrame(gray, seen, "DetailRegressor::AddWrinkleFrame");
@@ -238,12 +258,15 @@ void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen) 
   }
   cv::add(m.seen_count, cv::Scalar(1), m.seen_count, seen_chart);
   ++m.frames;
+  if (!map_texture.empty()) m.RequireFrame(map_texture, cv::Mat(), "DetailRegressor::AddWrinkleFrame map texture");
   if (m.flattens()) {  // the map waits for the reference (FixLayout)
     m.held_gray.push_back(gray.clone());
     m.held_seen.push_back(seen_chart);
+    m.held_map.push_back(map_texture.empty() ? cv::Mat() : map_texture.clone());
+    m.held_expression.push_back(std::isfinite(expression) ? expression : 0.0);
     return;
   }
-  m.AddToMap(gray, seen_chart);
+  m.AddToMap(map_texture.empty() ? gray : map_texture, seen_chart);
 }
 
 // The wrinkle map's share of one frame (Sec. 5.2), unseen chart texels extended
@@ -294,14 +317,17 @@ void DetailRegressor::FixLayout() {
                         "first N frames' textures first, Sec. 5.2)");
   const int R = m.R;
   if (m.flattens()) {
-    m.reference = MedianTexture(m.held_gray, m.held_seen);
-    cv::Mat usable = m.coverage.clone();
-    cv::bitwise_and(usable, m.reference > 1e-4f, usable);
-    m.reference_mean = cv::countNonZero(usable) > 0 ? cv::mean(m.reference, usable)[0] : 0.0;
-    for (size_t k = 0; k < m.held_gray.size(); ++k)
-      m.AddToMap(FlattenByReference(m.held_gray[k], m.reference, m.held_seen[k], m.reference_mean), m.held_seen[k]);
+    m.FixReference();
+    for (size_t k = 0; k < m.held_gray.size(); ++k) {
+      m.AddToMap(m.held_map[k].empty()
+                     ? FlattenByReference(m.held_gray[k], m.reference, m.held_seen[k],
+                                          m.model.wrinkle.texture_reference, m.reference_mean)
+                     : m.held_map[k],
+                 m.held_seen[k]);
+    }
     m.held_gray.clear();
     m.held_seen.clear();
+    m.held_map.clear();
   }
   m.wmap = m.builder->Finish();
   // W(p) = Σ_j [r_j > α] r_j / J_p, 0 where J_p < min fraction · J (header).

@@ -153,7 +153,15 @@ class DetailRegressor {
   // Adds T^t (CV_32F R×R, linear [0, 1], 0 where unseen) and its seen mask (CV_8U R×R,
   // non-zero = seen; empty = all seen) to the wrinkle map (Sec. 5.2). Throws Error
   // after FixLayout, on a wrong type or size, or non-finite seen texels.
-  void AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen);
+  // `expression`: how far the frame's expression is from the neutral (capture: the
+  // norm of the tracker's β). With the model's texture_reference = neutral the
+  // reference is the per-texel median of the quarter of the wrinkle frames closest
+  // to the neutral (at least one; all frames when every value is equal).
+  // `map_texture` (optional, CV_32F R×R): build the wrinkle map from it instead of
+  // `gray`, unflattened (the ladder's rung R1, true patch sites); `gray` still feeds
+  // the reference.
+  void AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen, double expression = 0.0,
+                       const cv::Mat& map_texture = cv::Mat());
   // True while fewer than options.wrinkle_frames frames were added and the layout is
   // not fixed.
   bool NeedsWrinkleFrames() const;

@@ -235,11 +235,11 @@ std::string TrainingSummary::ToMarkdown() const {
 
 namespace {
 
-// Difference 6 (WrinkleMapOptions::texture_reference = neutral): each texture
+// Difference 6 (WrinkleMapOptions::texture_reference, `mode`): each texture
 // flattened by the neutral scan's texture under the same light (the first texture
 // of each light: the neutral scan comes first).
-void FlattenByNeutral(const std::vector<std::string>& lights, const std::vector<cv::Mat>& coverage,
-                      std::vector<cv::Mat>* textures) {
+void FlattenByNeutral(const std::string& mode, const std::vector<std::string>& lights,
+                      const std::vector<cv::Mat>& coverage, std::vector<cv::Mat>* textures) {
   std::map<std::string, size_t> neutral;
   for (size_t t = 0; t < textures->size(); ++t) neutral.emplace(lights[t], t);
   std::map<std::string, cv::Mat> reference;
@@ -247,7 +247,7 @@ void FlattenByNeutral(const std::vector<std::string>& lights, const std::vector<
   for (size_t t = 0; t < textures->size(); ++t) {
     cv::Mat seen;
     cv::bitwise_and(coverage[t], coverage[neutral[lights[t]]], seen);
-    (*textures)[t] = FlattenByReference((*textures)[t], reference[lights[t]], seen);
+    (*textures)[t] = FlattenByReference((*textures)[t], reference[lights[t]], seen, mode);
   }
 }
 
@@ -430,7 +430,8 @@ TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const
                                                 fmt::join(lights, ", ")));
     // --- Sec. 4.2: wrinkle map, patch layout, training pairs.
     t0 = Clock::now();
-    if (options.wrinkle.texture_reference == "neutral") FlattenByNeutral(texture_light, texture_coverage, &gray_textures);
+    if (options.wrinkle.texture_reference != "none")
+      FlattenByNeutral(options.wrinkle.texture_reference, texture_light, texture_coverage, &gray_textures);
     cv::Mat coverage = extractor.coverage().clone();
     for (const auto& c : texture_coverage) cv::bitwise_and(coverage, c, coverage);
     WrinkleMapBuilder builder(R, coverage, rig.regions, options.wrinkle);

@@ -42,7 +42,7 @@ void WrinkleMapOptions::Check() const {
   CheckGe(o, "patch_exclude_margin", patch_exclude_margin, 0.0);
   CheckLe(o, "patch_exclude_margin", patch_exclude_margin, 1000.0);
   CheckLe(o, "orientation_smoothing_sigma", orientation_smoothing_sigma, 1000.0);
-  CheckOneOf(o, "texture_reference", texture_reference, {"none", "neutral"});
+  CheckOneOf(o, "texture_reference", texture_reference, {"none", "ratio", "difference"});
   for (size_t k = 0; k < patch_regions.size(); ++k) {
     Require(!patch_regions[k].empty(),
             fmt::format("WrinkleMapOptions.patch_regions[{}] is empty; expected a region name", k));
@@ -245,7 +245,9 @@ cv::Mat DogResponse(const cv::Mat& gray_texture, const WrinkleMapOptions& option
 }
 
 cv::Mat FlattenByReference(const cv::Mat& texture, const cv::Mat& reference, const cv::Mat& coverage,
-                           double reference_mean) {
+                           const std::string& mode, double reference_mean) {
+  CheckOneOf("FlattenByReference", "mode", mode, {"ratio", "difference"});
+  const bool ratio = mode == "ratio";
   RequireGray(texture, "FlattenByReference texture");
   RequireGray(reference, "FlattenByReference reference");
   Require(texture.size() == reference.size() && (coverage.empty() || coverage.size() == texture.size()),
@@ -272,7 +274,8 @@ cv::Mat FlattenByReference(const cv::Mat& texture, const cv::Mat& reference, con
     const float* r = reference.ptr<float>(y);
     float* o = out.ptr<float>(y);
     for (int x = 0; x < texture.cols; ++x)
-      if (usable(y, x) && t[x] > 0.0f) o[x] = static_cast<float>(t[x] * reference_mean / r[x]);
+      if (usable(y, x) && t[x] > kMinReference)
+        o[x] = static_cast<float>(ratio ? t[x] * reference_mean / r[x] : t[x] - r[x] + reference_mean);
   }
   return out;
 }

@@ -50,17 +50,28 @@
 //      (quick detail-accuracy, seed 1: 0.062 with them, −0.006 without), so the
 //      default keeps the paper's regions. Regions the rig does not define are
 //      skipped (a rig imported from blendshape OBJs has no brow masks).
-//   6. Optional (texture_reference = neutral; the paper reads T itself): the map and
-//      the patch features read T flattened by a reference texture of the same
-//      person under the same light, T · mean(T_ref) / T_ref. Texture = albedo ×
+//   6. Optional (texture_reference = ratio or difference; the paper reads T
+//      itself): the map and the patch features read T flattened by a reference
+//      texture of the same person under the same light, T · mean(T_ref) / T_ref or
+//      T − T_ref + mean(T_ref). Texture = albedo ×
 //      shading, so the static appearance — brows, lashes, the hairline, lids,
 //      moles, skin tone — cancels and the expression's shading is left. On the
 //      studio's scans the raw map puts most patches on the hair edge, the brows
 //      and the lids (their texture patches are dark hair edges, their displacement
 //      patches unrelated to them); flattened, the patches sit on the lines.
 //      Reference: the actor's neutral scan in training; in capture the per-texel
-//      median of the N wrinkle frames (the user's resting appearance, as long as
-//      each wrinkle shows in fewer than half of them).
+//      median of the quarter of the N wrinkle frames whose tracked expression is
+//      closest to the neutral (the user's resting appearance).
+//      Measured (crease 0.4.1; stratified studio scans, 4 actors, studio light;
+//      novel actor's 241-frame wrinkle-workout at 640×480, ground-truth fit):
+//        pairs:  3045 (none), 249 (ratio), 308 (difference);
+//        leave one actor out, cascade, held out: 0.17–0.38 (mean patch
+//        0.08–0.19) / 0.47–0.74 (0.32–0.64) / 0.43–0.63 (0.30–0.55): the patches sit
+//        on lines, whose displacement is more alike across actors;
+//        capture, D^t against D* in the wrinkle regions: 0.149 / 0.078 / 0.144; its
+//        wrinkle band 0.167 / 0.117 / 0.136; against the wrinkle layer alone 0.095 /
+//        0.014 / 0.027. The gain of the patch regression does not reach the
+//        capture, so the default stays the paper's "none".
 #pragma once
 
 #include <memory>
@@ -110,25 +121,28 @@ struct WrinkleMapOptions {
   // at dog_reference_resolution (not in the paper; Difference 4). 0 = none.
   double orientation_smoothing_sigma = 3.0;
   // What the wrinkle map and the patch features read (issue 17; not in the paper,
-  // Difference 6): "none" — the texture T itself (the paper); "neutral" — T
+  // Difference 6): "none" — the texture T itself (the paper); "ratio" — T
   // flattened by a reference texture of the same person under the same light,
-  // T · mean(T_ref) / T_ref (FlattenByReference), so the person's static
-  // appearance (brows, lashes, hairline, lids, moles, albedo) cancels and what is
-  // left is the shading the expression changes. The reference is the actor's
-  // neutral scan in training and the per-texel median of the wrinkle frames in
-  // capture (MedianTexture).
+  // T · mean(T_ref) / T_ref; "difference" — T − T_ref + mean(T_ref)
+  // (FlattenByReference). Either way the person's static appearance (brows, lashes,
+  // hairline, lids, moles) cancels and what is left is the shading the expression
+  // changes; the ratio also cancels the albedo's scaling of that shading but
+  // amplifies noise where T_ref is dark. The reference is the actor's neutral scan
+  // in training and, in capture, the per-texel median of the wrinkle frames closest
+  // to the neutral (MedianTexture).
   std::string texture_reference = "none";
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
 };
 
-// Difference 6 (WrinkleMapOptions::texture_reference): T · m / T_ref on the texels
-// where both are seen (T_ref > 1e-4 and `coverage` non-zero; empty = all), 0
-// elsewhere; m = the mean of T_ref over those texels of the reference (pass
-// reference_mean < 0 to compute it). All CV_32FC1 of one size.
+// Difference 6 (WrinkleMapOptions::texture_reference, `mode` "ratio" or
+// "difference"): T · m / T_ref or T − T_ref + m on the texels where both are seen
+// (T, T_ref > 1e-4 and `coverage` non-zero; empty = all), 0 elsewhere; m = the mean
+// of T_ref over those texels of the reference (pass reference_mean < 0 to compute
+// it). All CV_32FC1 of one size.
 cv::Mat FlattenByReference(const cv::Mat& texture, const cv::Mat& reference, const cv::Mat& coverage,
-                           double reference_mean = -1.0);
+                           const std::string& mode, double reference_mean = -1.0);
 // The per-texel median of `textures` over the frames that saw the texel (`seen`:
 // CV_8U masks, one per texture, or empty = all seen); 0 where none did.
 cv::Mat MedianTexture(const std::vector<cv::Mat>& textures, const std::vector<cv::Mat>& seen);
