@@ -359,7 +359,9 @@ TEST(Actor, PersonalExpressionsDeviateFromTheRigWhereItMoves) {
     const Eigen::VectorXf B = rig.expression_basis.col(b), P = personal.expression_basis.col(b);
     EXPECT_GT((P - B).norm(), 0.02 * B.norm()) << rig.expression_names[b];
     for (Eigen::Index i = 0; i < B.size(); ++i) {
-      if (B[i] == 0.0f) EXPECT_EQ(P[i], 0.0f);
+      if (B[i] == 0.0f) {
+        EXPECT_EQ(P[i], 0.0f);
+      }
       EXPECT_LE(std::abs(P[i]), 2.0f * std::abs(B[i]) + 1e-6f);
       EXPECT_GE(P[i] * B[i], 0.0f);
     }

@@ -163,7 +163,9 @@ TEST(Tracker, PassesTheFittedLandmarksOnAsTheNextInitialisation) {
       ASSERT_EQ(init.rows(), 68);
       EXPECT_LT((init - tracker.fitter().ProjectLandmarks(t.fit)).cwiseAbs().maxCoeff(), 1e-9);
     }
-    if (!init_from_fit) EXPECT_TRUE(recording->inits.empty());
+    if (!init_from_fit) {
+      EXPECT_TRUE(recording->inits.empty());
+    }
   }
 }
 

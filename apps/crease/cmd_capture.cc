@@ -37,21 +37,6 @@ using nlohmann::json;
 
 namespace {
 
-// A displacement map as a blue–white–red picture (±scale mm), BGR 8-bit.
-cv::Mat DisplacementPicture(const cv::Mat& d, double scale_mm) {
-  cv::Mat out(d.size(), CV_8UC3);
-  for (int j = 0; j < d.rows; ++j) {
-    const float* p = d.ptr<float>(j);
-    cv::Vec3b* q = out.ptr<cv::Vec3b>(j);
-    for (int i = 0; i < d.cols; ++i) {
-      const double x = std::clamp(p[i] / scale_mm, -1.0, 1.0);
-      const uint8_t a = static_cast<uint8_t>(255 * (1 - std::abs(x)));
-      q[i] = x >= 0 ? cv::Vec3b(a, a, 255) : cv::Vec3b(255, a, a);
-    }
-  }
-  return out;
-}
-
 struct MeshSeries {
   std::string name;
   std::unique_ptr<PvdWriter> pvd;
@@ -226,7 +211,7 @@ void AddCaptureCommands(CLI::App& app) {
           }
           DrawTracking(t, projected, face_F, &bgr);
           cv::Mat side = cv::Mat::zeros(panel, panel, CV_8UC3);
-          if (f.has_detail) cv::resize(DisplacementPicture(f.displacement, scale_mm), side, side.size(), 0, 0, cv::INTER_AREA);
+          if (f.has_detail) cv::resize(DisplacementPicture(f.displacement, scale_mm, cv::Mat(), /*bgr=*/true), side, side.size(), 0, 0, cv::INTER_AREA);
           cv::putText(side, fmt::format("D^t  +/-{:.1f} mm", scale_mm), cv::Point(8, 18), cv::FONT_HERSHEY_SIMPLEX, 0.5,
                       cv::Scalar(40, 40, 40), 1, cv::LINE_AA);
           cv::Mat both;

@@ -85,25 +85,6 @@ std::vector<std::string> SelectLights(const ScanSet& set, const std::string& spe
   return out;
 }
 
-// A displacement map as a diverging-colour PNG (blue = inwards, red = outwards),
-// ±range mm, grey outside the mask.
-cv::Mat DisplacementPicture(const cv::Mat& d, const cv::Mat& mask, double range) {
-  cv::Mat out(d.size(), CV_8UC3);
-  for (int j = 0; j < d.rows; ++j) {
-    for (int i = 0; i < d.cols; ++i) {
-      if (!mask.empty() && !mask.at<uint8_t>(j, i)) {
-        out.at<cv::Vec3b>(j, i) = cv::Vec3b(60, 60, 60);
-        continue;
-      }
-      const double x = std::clamp(d.at<float>(j, i) / range, -1.0, 1.0);
-      const double r = x > 0 ? 1.0 : 1.0 + x, b = x < 0 ? 1.0 : 1.0 - x, g = 1.0 - std::abs(x);
-      out.at<cv::Vec3b>(j, i) = cv::Vec3b(static_cast<uint8_t>(255 * r), static_cast<uint8_t>(255 * g),
-                                          static_cast<uint8_t>(255 * b));
-    }
-  }
-  return out;
-}
-
 cv::Mat ResizeMask(const cv::Mat& mask, int size) {
   if (mask.rows == size && mask.cols == size) return mask;
   cv::Mat out;
@@ -382,14 +363,14 @@ TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const
         if (pictures) {
           double range = std::max(0.05, 3.0 * acc.face.reference_rms_mm);
           cv::Mat both;
-          cv::hconcat(DisplacementPicture(detail.displacement, mask, range), DisplacementPicture(truth, mask, range), both);
+          cv::hconcat(DisplacementPicture(detail.displacement, range, mask), DisplacementPicture(truth, range, mask), both);
           WriteImage(outputs.report_dir / fmt::format("displacement_{}_{}.png", actor.name, scan.name), both,
                      {.srgb = false});
         }
         sum.accuracy.push_back(std::move(acc));
       } else if (pictures) {
         WriteImage(outputs.report_dir / fmt::format("displacement_{}_{}.png", actor.name, scan.name),
-                   DisplacementPicture(detail.displacement, detail.valid, 0.3), {.srgb = false});
+                   DisplacementPicture(detail.displacement, 0.3, detail.valid), {.srgb = false});
       }
       // The textures T^j: one per selected light rig, from that rig's images.
       t0 = Clock::now();
