@@ -158,6 +158,12 @@ ok "experiment run (tiny, real stages)" "$crease" experiment run "$data/../tests
 ok "experiment rerun (all cached)" "$crease" experiment run "$data/../tests/data/experiment_tiny.yaml" -o "$tmp/exp"
 grep -q "10 stages (10 cached, 0 run, 0 failed)" "$tmp/out" || { echo "FAIL: rerun did not reuse the cache"; cat "$tmp/out"; fails=$((fails+1)); }
 ok "report" "$crease" report "$tmp/exp/tiny"
+# The detail ladder's own stages (issue 17): leave one actor out (R0) and the truth
+# maps that place R1's patches.
+ok "experiment run (tiny ladder)" "$crease" experiment run "$data/../tests/data/experiment_tiny_ladder.yaml" -o "$tmp/exp"
+grep -q '"r0.held_out.ridge.correlation"' "$tmp/exp/tiny-ladder/runs/rung=R1_seed1.json" &&
+  ls "$tmp"/exp/cache/truth-maps/*/maps/000002.exr > /dev/null 2>&1 ||
+  { echo "FAIL: the ladder's loao or truth-maps stage left nothing"; fails=$((fails+1)); }
 grep -q "refine" "$tmp/exp/tiny/report.md" && [ -s "$tmp/exp/tiny/figures/tiny_err.png" ] ||
   { echo "FAIL: report lacks the claim or the figure"; fails=$((fails+1)); }
 
