@@ -771,8 +771,9 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       }
       if (prev_frame == index - 1 && !prev_D.empty() && prev_beta.size() == beta.size() &&
           (beta - prev_beta).cwiseAbs().maxCoeff() < 1e-6) {
-        e.still = true;
-        e.d_still_correlation = CompareMaps(D, prev_D, wrinkle_mask).correlation;
+        const MapComparison c = CompareMaps(D, prev_D, wrinkle_mask);
+        e.still = c.extracted_rms_mm > 0 && c.reference_rms_mm > 0;  // no patch, no detail: nothing to compare
+        e.d_still_correlation = c.correlation;
       }
     }
 

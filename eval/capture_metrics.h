@@ -144,7 +144,7 @@ struct FrameCaptureEval {
   MapComparison d_face, d_wrinkle, d_face_band, d_wrinkle_band;
   double d_jitter_mm = 0;  // band, wrinkle regions
   // Still face: the true expression equals the previous frame's (a hold) and D^t
-  // exists in both; the correlation of D^t with the previous frame's D^t in the
+  // exists and is not zero in both; the correlation of D^t with the previous frame's D^t in the
   // wrinkle regions (1 = the regression is stable where nothing changes).
   bool still = false;
   double d_still_correlation = 0;
