@@ -31,6 +31,19 @@ class NameCollector final : public OptionVisitor {
   void Field(const char* n, std::vector<std::string>&) override { names.emplace_back(n); }
 };
 
+// The names of `visit`'s fields; two fields under one name (nested option structs
+// that both register it, so that one key would set both) are an error (issue 18).
+std::vector<std::string> UniqueFieldNames(void* options, void (*visit)(void*, OptionVisitor&),
+                                          const std::string& what) {
+  NameCollector c;
+  visit(options, c);
+  std::set<std::string> seen;
+  for (const auto& n : c.names)
+    Require(seen.insert(n).second,
+            fmt::format("{}: two options register the key '{}' (a crease bug: one key would set both)", what, n));
+  return c.names;
+}
+
 class JsonReader final : public OptionVisitor {
  public:
   JsonReader(const json& j, const std::string& what) : j_(j), what_(what) {}
@@ -138,13 +151,12 @@ void SetFromJson(const json& j, const std::string& what, void* options,
     throw Error(fmt::format("{}: expected a mapping of option names to values, got {}", what,
                             j.type_name()));
   }
-  NameCollector names;
-  visit(options, names);
-  const std::set<std::string> known(names.names.begin(), names.names.end());
+  const std::vector<std::string> names = UniqueFieldNames(options, visit, what);
+  const std::set<std::string> known(names.begin(), names.end());
   for (auto it = j.begin(); it != j.end(); ++it) {
     if (!known.count(it.key())) {
       std::string list;
-      for (const auto& n : names.names) list += (list.empty() ? "" : ", ") + n;
+      for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
       throw Error(fmt::format("{}: unknown option '{}' (known options: {})", what, it.key(), list));
     }
   }
@@ -223,9 +235,7 @@ void SetFieldsFromYamlText(const std::string& yaml_text, const std::string& what
 }
 
 std::vector<std::string> FieldNames(void* options, void (*visit)(void*, OptionVisitor&)) {
-  NameCollector c;
-  visit(options, c);
-  return c.names;
+  return UniqueFieldNames(options, visit, "options");
 }
 
 std::string YamlTextToJsonText(const std::string& yaml_text, const std::string& what) {

@@ -349,6 +349,18 @@ TEST(Experiment, VariantsSweepBundlesOfSettingsAndTheLadderPlansItsRungs) {
   ExpectErrorNaming(bad, "wdth");
 }
 
+// Every key of the nested option structs is registered once (issue 18: the landmark
+// fit's and the refinement's expression prior shared one key until crease 0.4.1).
+TEST(Experiment, StageOptionsRegisterEachKeyOnce) {
+  EXPECT_NO_THROW(OptionFieldNames<CaptureOptions>());
+  EXPECT_NO_THROW(OptionFieldNames<TrainingOptions>());
+  EXPECT_NO_THROW(OptionFieldNames<ExperimentDataset>());
+  CaptureOptions o;
+  SetOptionsFromJson(R"({"fit_expression_prior_weight": 2, "refine_expression_prior_weight": 7})", "capture", &o);
+  EXPECT_EQ(o.tracker.fit.fit_expression_prior_weight, 2.0);
+  EXPECT_EQ(o.refinement.fit_expression_prior_weight, 7.0);
+}
+
 json RunJsonWithoutTimes(const fs::path& file) {
   json j = ReadJsonFile(file);
   j.erase("stage_seconds");

@@ -86,6 +86,26 @@ TEST(Options, UnknownKeysAndWrongTypesAreRejectedByName) {
   EXPECT_NE(e.find("bad.json: malformed JSON"), std::string::npos) << e;
 }
 
+// Two nested option structs registering one key (issue 18: one YAML key silently
+// set two weights) are refused, naming the key, whatever reads the options.
+struct Colliding {
+  ExampleOptions a, b;
+  void VisitFields(OptionVisitor& v) {
+    a.VisitFields(v);
+    v.Field("other", b.beta);
+    v.Field("beta", b.beta);
+  }
+  void Check() const {}
+};
+
+TEST(Options, TwoFieldsUnderOneKeyAreABug) {
+  Colliding c;
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromJson(R"({"beta": 2})", "colliding", &c); }).find("'beta'"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { OptionFieldNames<Colliding>(); }).find("'beta'"), std::string::npos);
+  EXPECT_NO_THROW(OptionFieldNames<ExampleOptions>());
+}
+
 TEST(Options, CheckIsCalledAndNamesTheField) {
   ExampleOptions o;
   std::string e = ErrorOf([&] { SetOptionsFromJson(R"({"num_ferns": 0})", "x", &o); });

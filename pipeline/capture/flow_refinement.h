@@ -253,6 +253,8 @@ struct FlowRefinementOptions {
   // w_l: weight of each of the tracker's 51 inner landmarks (iBUG 18–68).
   double fit_landmark_weight = 0.5;
   // λ_β: expression prior (pulls β to 0), px² per unit weight² (the tracker's default).
+  // Key `refine_expression_prior_weight`: `fit_expression_prior_weight` is the
+  // landmark fit's (LandmarkFitOptions), and until crease 0.4.1 one key set both.
   double fit_expression_prior_weight = 5.0;
   // λ_τ: pulls β towards the tracker's β, px² per unit weight² (0 disables).
   double fit_tracker_prior_weight = 1.0;
