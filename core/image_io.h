@@ -33,11 +33,4 @@ cv::Mat ReadImage(const std::filesystem::path& path, bool srgb = true);
 void WriteImage(const std::filesystem::path& path, const cv::Mat& image,
                 const ImageWriteOptions& options = {});
 
-// A displacement map (CV_32FC1, mm) as an 8-bit picture: blue inwards, white 0,
-// red outwards, saturating at ±range_mm; grey where `mask` (CV_8U, optional) is 0.
-// Channels R, G, B (for WriteImage with srgb = false), or B, G, R with `bgr` (for
-// OpenCV's video writer and imwrite).
-cv::Mat DisplacementPicture(const cv::Mat& d, double range_mm, const cv::Mat& mask = cv::Mat(), bool bgr = false);
-
-
 }  // namespace crease

@@ -12,6 +12,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/error.h"
 #include "core/options.h"
 #include "core/rng.h"
 #include "test_util.h"
@@ -377,6 +378,26 @@ TEST(PatchesTest, DrawPatchLayout) {
   cv::Mat cyan;
   cv::inRange(picture, cv::Scalar(200, 200, 0), cv::Scalar(255, 255, 60), cyan);
   EXPECT_GT(cv::countNonZero(cyan), 100);
+}
+
+// Pairs side by side: a dark texture column is drawn dark, a groove blue and a ridge
+// red (R, G, B), one cell per pair, evenly spread over the rows.
+TEST(PatchesTest, PairMosaicDrawsTexturesBesideTheirDisplacements) {
+  const int w = 4, n = w * w;
+  Eigen::MatrixXf t = Eigen::MatrixXf::Constant(3, n, 0.5f), d = Eigen::MatrixXf::Zero(3, n);
+  for (int r = 0; r < 3; ++r)
+    for (int y = 0; y < w; ++y) t(r, y * w) = 0.1f;  // left column dark
+  d.row(0).setConstant(-0.2f);  // a groove
+  d.row(2).setConstant(0.3f);   // a ridge
+  const cv::Mat m = PairMosaic(t, d, w, 2, /*scale=*/1);
+  ASSERT_EQ(m.type(), CV_8UC3);
+  EXPECT_EQ(m.rows, w + 2);
+  EXPECT_EQ(m.at<cv::Vec3b>(1, 0), cv::Vec3b(0, 0, 0));        // dark texel, stretched to black
+  EXPECT_EQ(m.at<cv::Vec3b>(1, 2), cv::Vec3b(255, 255, 255));  // bright texel
+  EXPECT_EQ(m.at<cv::Vec3b>(1, w + 1), cv::Vec3b(0, 0, 255));  // pair 0: groove, blue
+  // The second cell shows row 1 of 3 (rows 0 and 1 of 2 shown: k·N/count): flat, white.
+  EXPECT_EQ(m.at<cv::Vec3b>(1, 2 * w + 2 + w + 1), cv::Vec3b(255, 255, 255));
+  EXPECT_THROW(PairMosaic(t, d, w + 1, 2), Error);
 }
 
 }  // namespace

@@ -17,6 +17,7 @@
 #include "core/face_rig.h"
 #include "core/file_util.h"
 #include "core/image_io.h"
+#include "core/picture.h"
 #include "core/json_io.h"
 #include "core/mesh_io.h"
 #include "core/options.h"

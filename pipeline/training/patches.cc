@@ -13,6 +13,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/error.h"
+#include "core/picture.h"
 #include "core/options.h"
 
 namespace crease {
@@ -524,6 +525,38 @@ cv::Mat DrawPatchLayout(const cv::Mat& wrinkle_map, const PatchLayout& layout, c
              kShift);
   }
   return heat;
+}
+
+cv::Mat PairMosaic(const Eigen::MatrixXf& texture, const Eigen::MatrixXf& displacement, int patch_size, int count,
+                   int scale) {
+  const int w = patch_size, n = w * w;
+  Require(w > 0 && count > 0 && scale > 0 && texture.cols() == n && displacement.cols() == n &&
+              texture.rows() == displacement.rows() && texture.rows() > 0,
+          fmt::format("PairMosaic: {}×{} texture and {}×{} displacement patches, patch size {}", texture.rows(),
+                      texture.cols(), displacement.rows(), displacement.cols(), w));
+  const int N = static_cast<int>(texture.rows()), shown = std::min(count, N), per_row = 8, gap = 2;
+  const int cell_w = 2 * w + gap, rows = (shown + per_row - 1) / per_row;
+  cv::Mat out(rows * (w + gap), per_row * cell_w, CV_8UC3, cv::Scalar(255, 255, 255));
+  for (int k = 0; k < shown; ++k) {
+    const int i = static_cast<int>(static_cast<int64_t>(k) * N / shown);
+    cv::Mat t(w, w, CV_32F), d(w, w, CV_32F);
+    for (int p = 0; p < n; ++p) {
+      t.at<float>(p / w, p % w) = texture(i, p);
+      d.at<float>(p / w, p % w) = displacement(i, p);
+    }
+    double lo = 0, hi = 0;
+    cv::minMaxLoc(t, &lo, &hi);
+    cv::Mat t8, t3;
+    t.convertTo(t8, CV_8U, hi > lo ? 255.0 / (hi - lo) : 0.0, hi > lo ? -255.0 * lo / (hi - lo) : 128.0);
+    cv::cvtColor(t8, t3, cv::COLOR_GRAY2RGB);
+    const double range = std::max(cv::norm(d, cv::NORM_INF), 1e-9);
+    const int x = (k % per_row) * cell_w, y = (k / per_row) * (w + gap);
+    t3.copyTo(out(cv::Rect(x, y, w, w)));
+    DisplacementPicture(d, range).copyTo(out(cv::Rect(x + w, y, w, w)));
+  }
+  cv::Mat big;
+  cv::resize(out, big, cv::Size(), scale, scale, cv::INTER_NEAREST);
+  return big;
 }
 
 }  // namespace crease

@@ -167,4 +167,12 @@ TrainingPatches ExtractTrainingPatches(const PatchLayout& layout, const std::vec
 // with a tick from its centre along +e1 (the gradient). CV_8UC3, BGR.
 cv::Mat DrawPatchLayout(const cv::Mat& wrinkle_map, const PatchLayout& layout, const cv::Mat& valid = cv::Mat());
 
+// Training pairs to look at (issue 17: the raw wrinkle map's pairs turned out to be
+// brow and hair edges): `count` rows of N × w² `texture` and `displacement`, evenly
+// spread over the rows, each texture patch (gray, stretched to its own range) beside
+// its displacement patch (DisplacementPicture, ±its own largest |d|), 8 pairs a row,
+// `scale`× enlarged. CV_8UC3, channels R, G, B.
+cv::Mat PairMosaic(const Eigen::MatrixXf& texture, const Eigen::MatrixXf& displacement, int patch_size, int count,
+                   int scale = 3);
+
 }  // namespace crease

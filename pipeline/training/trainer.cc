@@ -16,6 +16,7 @@
 #include "core/camera.h"
 #include "core/error.h"
 #include "core/image_io.h"
+#include "core/picture.h"
 #include "core/mesh_io.h"
 #include "core/options.h"
 #include "core/progress.h"
@@ -520,6 +521,8 @@ DetailModel TrainDetailModelFromPairs(const TrainingPairs& pairs, const Training
     cv::Mat big;
     cv::resize(mosaic, big, cv::Size(), 4, 4, cv::INTER_NEAREST);
     WriteImage(outputs.report_dir / "eigen_patches.png", big);
+    WriteImage(outputs.report_dir / "pairs.png", PairMosaic(pairs.texture, Dp, options.patch.patch_size, 48),
+               {.srgb = false});
     std::string csv = "dimensions,energy\n";
     for (size_t k = 0; k < model.pca.energy.size(); ++k) csv += fmt::format("{},{:.6f}\n", k + 1, model.pca.energy[k]);
     std::ofstream(outputs.report_dir / "pca_energy.csv") << csv;
