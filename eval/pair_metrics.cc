@@ -109,14 +109,16 @@ LeaveOneActorOutResult EvaluateLeaveOneActorOut(const TrainingPairs& pairs, cons
     fold.actor = pairs.actor_names[a];
     fold.training_pairs = static_cast<int>(train_rows.size());
     const std::string fold_what = fmt::format("{} without {}", what, fold.actor);
+    // The baselines' inputs and targets, as TrainDetailModelFromPairs gives the cascade.
+    const Eigen::MatrixXf features =
+        NormalizeTexturePatches(train.texture, model.cascade.options.fern_texture_normalization);
+    const Eigen::MatrixXf targets = model.pca.ProjectPatches(train.displacement);
     for (size_t r = 0; r < regressors.size(); ++r) {
       model.baseline = PatchBaseline();
       if (regressors[r] != "ferns") {
         PatchBaselineOptions b = options.baseline;
         b.regressor = regressors[r];
-        model.baseline = FitPatchBaseline(
-            NormalizeTexturePatches(train.texture, model.cascade.options.fern_texture_normalization),
-            model.pca.ProjectPatches(train.displacement), b);
+        model.baseline = FitPatchBaseline(features, targets, b);
       }
       fold.held_out.push_back(EvaluatePairs(model, test, fold_what));
       if (r == 0) fold.seen = EvaluatePairs(model, train, fold_what);

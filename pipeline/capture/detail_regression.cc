@@ -96,9 +96,13 @@ struct DetailRegressor::Impl {
   // ratio or difference, itself otherwise.
   cv::Mat Input(const cv::Mat& gray, const cv::Mat& seen) const {
     if (!flattens()) return gray.isContinuous() ? gray : gray.clone();
+    return FlattenByReference(gray, reference, SeenChart(seen), model.wrinkle.texture_reference, reference_mean);
+  }
+  // The chart texels seen in a frame (coverage ∧ seen; empty seen = all).
+  cv::Mat SeenChart(const cv::Mat& seen) const {
     cv::Mat seen_chart = coverage.clone();
     if (!seen.empty()) cv::bitwise_and(seen_chart, seen != 0, seen_chart);
-    return FlattenByReference(gray, reference, seen_chart, model.wrinkle.texture_reference, reference_mean);
+    return seen_chart;
   }
   void AddToMap(const cv::Mat& gray, const cv::Mat& seen_chart);
 
@@ -115,9 +119,7 @@ struct DetailRegressor::Impl {
       seen.push_back(held_seen[k]);
     }
     reference = MedianTexture(gray, seen);
-    cv::Mat usable = coverage.clone();
-    cv::bitwise_and(usable, reference > 1e-4f, usable);
-    reference_mean = cv::countNonZero(usable) > 0 ? cv::mean(reference, usable)[0] : 0.0;
+    reference_mean = ReferenceMean(reference, coverage);
   }
 
   void RequireFrame(const cv::Mat& gray, const cv::Mat& seen, const char* what) const {
@@ -249,13 +251,7 @@ void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen, 
   Impl& m = *impl_;
   Require(!m.fixed, "DetailRegressor::AddWrinkleFrame: the layout is already fixed (FixLayout was called)");
   m.RequireFrame(gray, seen, "DetailRegressor::AddWrinkleFrame");
-  // Seen chart texels.
-  cv::Mat seen_chart = m.coverage.clone();
-  if (!seen.empty()) {
-    cv::Mat s;
-    cv::compare(seen, 0, s, cv::CMP_NE);
-    cv::bitwise_and(seen_chart, s, seen_chart);
-  }
+  const cv::Mat seen_chart = m.SeenChart(seen);
   cv::add(m.seen_count, cv::Scalar(1), m.seen_count, seen_chart);
   ++m.frames;
   if (!map_texture.empty()) m.RequireFrame(map_texture, cv::Mat(), "DetailRegressor::AddWrinkleFrame map texture");

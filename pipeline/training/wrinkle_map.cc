@@ -257,17 +257,7 @@ cv::Mat FlattenByReference(const cv::Mat& texture, const cv::Mat& reference, con
   auto usable = [&](int y, int x) {
     return (coverage.empty() || coverage.at<uint8_t>(y, x)) && reference.at<float>(y, x) > kMinReference;
   };
-  if (reference_mean < 0) {
-    double sum = 0;
-    int64_t n = 0;
-    for (int y = 0; y < reference.rows; ++y)
-      for (int x = 0; x < reference.cols; ++x)
-        if (usable(y, x)) {
-          sum += reference.at<float>(y, x);
-          ++n;
-        }
-    reference_mean = n > 0 ? sum / static_cast<double>(n) : 0.0;
-  }
+  if (reference_mean < 0) reference_mean = ReferenceMean(reference, coverage);
   cv::Mat out(texture.size(), CV_32F, cv::Scalar(0));
   for (int y = 0; y < texture.rows; ++y) {
     const float* t = texture.ptr<float>(y);
@@ -278,6 +268,13 @@ cv::Mat FlattenByReference(const cv::Mat& texture, const cv::Mat& reference, con
         o[x] = static_cast<float>(ratio ? t[x] * reference_mean / r[x] : t[x] - r[x] + reference_mean);
   }
   return out;
+}
+
+double ReferenceMean(const cv::Mat& reference, const cv::Mat& coverage) {
+  RequireGray(reference, "ReferenceMean reference");
+  cv::Mat usable = reference > 1e-4f;
+  if (!coverage.empty()) cv::bitwise_and(usable, coverage != 0, usable);
+  return cv::countNonZero(usable) > 0 ? cv::mean(reference, usable)[0] : 0.0;
 }
 
 cv::Mat MedianTexture(const std::vector<cv::Mat>& textures, const std::vector<cv::Mat>& seen) {

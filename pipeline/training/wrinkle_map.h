@@ -143,6 +143,9 @@ struct WrinkleMapOptions {
 // it). All CV_32FC1 of one size.
 cv::Mat FlattenByReference(const cv::Mat& texture, const cv::Mat& reference, const cv::Mat& coverage,
                            const std::string& mode, double reference_mean = -1.0);
+// m of FlattenByReference: the mean of `reference` over its texels above 1e-4 within
+// `coverage` (empty = all); 0 when there are none.
+double ReferenceMean(const cv::Mat& reference, const cv::Mat& coverage);
 // The per-texel median of `textures` over the frames that saw the texel (`seen`:
 // CV_8U masks, one per texture, or empty = all seen); 0 where none did.
 cv::Mat MedianTexture(const std::vector<cv::Mat>& textures, const std::vector<cv::Mat>& seen);
