@@ -7,6 +7,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "core/ibug.h"
 #include "core/image_io.h"
 #include "pipeline/capture/landmarks.h"
 #include "synth/dataset.h"
@@ -59,9 +60,9 @@ RealismCheckReport RunRealismCheck(const FaceRig& rig, const RealismCheckOptions
           const LandmarkResult r = dlib.Track(f.image.decoded);
           MatX2d gt(68, 2);
           for (int i = 0; i < 68; ++i) gt.row(i) = f.truth.landmark_pixels.row(ibug[i]);
-          row.iod_px = (gt.row(36) - gt.row(45)).norm();
+          row.iod_px = InterOcularDistance(gt);
           // Count a detection only when it is this face (its box holds the true nose tip).
-          const Eigen::Vector2d nose = gt.row(30).transpose();
+          const Eigen::Vector2d nose = gt.row(kIbugNoseTip).transpose();
           const auto holds_face = [&](const FaceBox& b) {
             return nose.x() >= b.x && nose.x() <= b.x + b.width && nose.y() >= b.y && nose.y() <= b.y + b.height;
           };

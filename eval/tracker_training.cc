@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
+#include "core/ibug.h"
 #include "core/image_io.h"
 #include "core/rng.h"
 #include "synth/actor.h"
@@ -28,7 +29,7 @@ double Seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
 
-double Iod(const MatX2d& s) { return std::max(1e-9, (s.row(36) - s.row(45)).norm()); }
+double Iod(const MatX2d& s) { return std::max(1e-9, InterOcularDistance(s)); }
 
 // The truth under a random similarity about its centroid (as ShapeRegressorOptions'
 // tracking-like augmentation).

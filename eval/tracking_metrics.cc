@@ -6,6 +6,7 @@
 
 #include "core/error.h"
 #include "core/file_util.h"
+#include "core/ibug.h"
 #include "core/json_io.h"
 
 namespace crease {
@@ -66,7 +67,7 @@ FrameTruth ReadFrameTruth(const fs::path& dataset, int frame, int num_vertices) 
 FrameTrackingError CompareToTruth(const FrameTruth& truth, const MatX2d& landmarks, const MatX2d& projected_landmarks,
                                   const MatX2d& projected_vertices) {
   FrameTrackingError e;
-  const double iod = (truth.landmarks.row(36) - truth.landmarks.row(45)).norm();
+  const double iod = InterOcularDistance(truth.landmarks);
   if (landmarks.rows() == 68) {
     e.landmark_px = (landmarks - truth.landmarks).rowwise().norm().mean();
     e.landmark_iod = iod > 0 ? e.landmark_px / iod : 0.0;

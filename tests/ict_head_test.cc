@@ -7,6 +7,7 @@
 
 #include <filesystem>
 
+#include "core/ibug.h"
 #include "eval/realism_check.h"
 #include "synth/dataset.h"
 #include "synth/actor.h"
@@ -41,11 +42,11 @@ TEST(IctHead, VendoredRigIsTheWholeHeadWithItsLicence) {
   }
   // Millimetres, x = the subject's left: iBUG 37 (right eye, outer corner) at -x,
   // 46 at +x, about 89 mm apart (ICT's mean head); the nose tip (31) in front.
-  const Eigen::Vector3d r = rig.neutral.V.row(rig.landmarks[36].vertex);
-  const Eigen::Vector3d l = rig.neutral.V.row(rig.landmarks[45].vertex);
+  const Eigen::Vector3d r = rig.neutral.V.row(rig.landmarks[kIbugRightEyeOuter].vertex);
+  const Eigen::Vector3d l = rig.neutral.V.row(rig.landmarks[kIbugLeftEyeOuter].vertex);
   EXPECT_LT(r.x(), 0.0);
   EXPECT_NEAR((l - r).norm(), 89.0, 3.0);
-  EXPECT_GT(rig.neutral.V(rig.landmarks[30].vertex, 2), l.z() + 30.0);
+  EXPECT_GT(rig.neutral.V(rig.landmarks[kIbugNoseTip].vertex, 2), l.z() + 30.0);
   // Every landmark is on the face chart (the anchors of the actor's maps).
   const int face = rig.PartIndex("face");
   for (const auto& lm : rig.landmarks) EXPECT_EQ(rig.vertex_part[lm.vertex], face) << lm.name;

@@ -11,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 #include <tbb/global_control.h>
 
+#include "core/ibug.h"
 #include "core/rng.h"
 #include "eval/tracker_training.h"
 #include "synth/procedural_rig.h"
@@ -79,8 +80,8 @@ TEST(ShapeRegressor, MeanShapeIsNormalised) {
   const Toy toy = MakeToy(10, 3);
   const MatX2d mean = MeanShapeOf(toy.shapes);
   EXPECT_NEAR(mean.colwise().mean().norm(), 0.0, 1e-9);
-  EXPECT_NEAR((mean.row(45) - mean.row(36)).norm(), 1.0, 1e-9);
-  EXPECT_NEAR(mean(45, 1) - mean(36, 1), 0.0, 1e-9);  // eyes horizontal
+  EXPECT_NEAR(InterOcularDistance(mean), 1.0, 1e-9);
+  EXPECT_NEAR(mean(kIbugLeftEyeOuter, 1) - mean(kIbugRightEyeOuter, 1), 0.0, 1e-9);  // eyes horizontal
 }
 
 TEST(ShapeRegressor, DeterministicSaveLoadRoundTripAndVersionCheck) {

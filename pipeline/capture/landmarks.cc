@@ -13,6 +13,7 @@
 
 #include "core/color.h"
 #include "core/error.h"
+#include "core/ibug.h"
 
 namespace crease {
 
@@ -94,7 +95,7 @@ namespace {
 // Anchor (mean of the nose and eye points, iBUG 28–48) and size (outer eye corners).
 void StableFrame(const MatX2d& p, Eigen::Vector2d* anchor, double* size) {
   *anchor = p.middleRows(27, 21).colwise().mean().transpose();
-  *size = std::max(1e-6, (p.row(36) - p.row(45)).norm());
+  *size = std::max(1e-6, InterOcularDistance(p));
 }
 
 }  // namespace
@@ -185,7 +186,7 @@ LandmarkResult DlibLandmarkSource::Track(const cv::Mat& image) {
     FaceBox guess{c.x() - 0.5 * size, c.y() - 0.5 * size, size, size, 0.0};
     const MatX2d p = Landmarks(image, guess);
     const FaceBox nb = BoxOfPoints(p);
-    const double ratio = (p.row(36) - p.row(45)).norm() / d;
+    const double ratio = InterOcularDistance(p) / d;
     const bool inside = nb.x >= -0.25 * nb.width && nb.y >= -0.25 * nb.height &&
                         nb.x + nb.width <= image.cols + 0.25 * nb.width && nb.y + nb.height <= image.rows + 0.25 * nb.height;
     // Periodic verification: the detector must find a face where the track is;

@@ -16,6 +16,7 @@
 #include "core/array_file.h"
 #include "core/color.h"
 #include "core/error.h"
+#include "core/ibug.h"
 #include "core/stats.h"
 #include "core/rng.h"
 #include "pipeline/training/fern_cascade.h"
@@ -27,12 +28,13 @@ namespace {
 using Cd = std::complex<double>;
 constexpr char kMagic[] = "CREASTRK";
 
-// The inter-ocular landmark pair of the 68 iBUG points (outer eye corners, the
-// 300-W convention); for other landmark counts the first and last point.
+// The inter-ocular landmark pair, `left` on the image's left in a frontal view: for
+// the 68 iBUG points the outer eye corners (the 300-W convention; core/ibug.h), the
+// subject's right eye first; for other landmark counts the first and last point.
 void EyePair(int num_landmarks, int* left, int* right) {
-  if (num_landmarks == 68) {
-    *left = 36;
-    *right = 45;
+  if (num_landmarks == kIbugNumPoints) {
+    *left = kIbugRightEyeOuter;
+    *right = kIbugLeftEyeOuter;
   } else {
     *left = 0;
     *right = num_landmarks - 1;
@@ -637,7 +639,7 @@ struct RegressorLandmarkSource::Impl {
   RegressorLandmarkOptions options;
   HogFaceDetector detector;  // shared with DlibLandmarkSource (landmarks.h), no 68-point model needed
   MatX2d previous;  // last frame's landmarks (empty after a loss)
-  int left_eye = 36, right_eye = 45;
+  int left_eye = kIbugRightEyeOuter, right_eye = kIbugLeftEyeOuter;  // set by EyePair
 
   std::vector<FaceBox> Detect(const cv::Mat& image) const { return detector.Detect(image); }
 };

@@ -71,6 +71,7 @@
 #include <Eigen/Core>
 #include <opencv2/core/mat.hpp>
 
+#include "core/ibug.h"
 #include "core/options.h"
 #include "core/types.h"
 #include "pipeline/capture/landmarks.h"
@@ -170,8 +171,10 @@ ShapeRegressorTrainingResult TrainShapeRegressor(const std::vector<cv::Mat>& ima
 // The mean shape of a set of shapes in the normalised frame (centroid 0,
 // inter-ocular distance 1, eyes horizontal), by iterated similarity alignment.
 // `left_eye`, `right_eye`: the landmark indices whose distance is the inter-ocular
-// distance (36 and 45 for the 68 iBUG points).
-MatX2d MeanShapeOf(const std::vector<MatX2d>& shapes, int left_eye = 36, int right_eye = 45);
+// distance, `left_eye` on the image's left in a frontal view; by default the 68 iBUG
+// points' outer eye corners (core/ibug.h), i.e. the subject's right eye, then the left.
+MatX2d MeanShapeOf(const std::vector<MatX2d>& shapes, int left_eye = kIbugRightEyeOuter,
+                   int right_eye = kIbugLeftEyeOuter);
 
 // Model file: magic "CREASTRK", version kShapeRegressorFileVersion (core/array_file.h).
 // Fits regressor->detector_box: runs dlib's HOG detector (`upsample`, `threshold` as

@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 
 #include "core/error.h"
+#include "core/ibug.h"
 #include "core/options.h"
 #include "pipeline/capture/shape_regressor.h"
 
@@ -68,7 +69,7 @@ TrackedFrame FaceTracker::Track(const cv::Mat& frame) {
   out.fit_ms = std::chrono::duration<double, std::milli>(Clock::now() - t1).count();
   // Confidence from how well the rig explains the landmarks, relative to the
   // face's size (inter-ocular distance: outer eye corners, iBUG 37 and 46).
-  const double iod = (lm.points.row(36) - lm.points.row(45)).norm();
+  const double iod = InterOcularDistance(lm.points);
   const double s = options_.confidence_scale_iod * std::max(iod, 1.0);
   out.confidence = std::exp(-0.5 * (out.fit.rms_px / s) * (out.fit.rms_px / s));
   out.tracked = out.confidence >= options_.min_confidence;
