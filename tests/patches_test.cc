@@ -374,10 +374,12 @@ TEST(PatchesTest, DrawPatchLayout) {
   const cv::Mat picture = DrawPatchLayout(map.probability, layout, map.valid);
   EXPECT_EQ(picture.type(), CV_8UC3);
   EXPECT_EQ(picture.rows, 512);  // small maps are enlarged (×4)
-  // The rectangles (cyan, BGR 255,255,0) are drawn.
-  cv::Mat cyan;
-  cv::inRange(picture, cv::Scalar(200, 200, 0), cv::Scalar(255, 255, 60), cyan);
+  // The rectangles (cyan: R, G, B = 0, 255, 255) are drawn, in R, G, B order.
+  cv::Mat cyan, yellow;
+  cv::inRange(picture, cv::Scalar(0, 200, 200), cv::Scalar(60, 255, 255), cyan);
   EXPECT_GT(cv::countNonZero(cyan), 100);
+  cv::inRange(picture, cv::Scalar(200, 200, 0), cv::Scalar(255, 255, 60), yellow);  // cyan as B, G, R
+  EXPECT_LT(cv::countNonZero(yellow), cv::countNonZero(cyan) / 4);
 }
 
 // Pairs side by side: a dark texture column is drawn dark, a groove blue and a ridge

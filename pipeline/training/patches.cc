@@ -524,6 +524,7 @@ cv::Mat DrawPatchLayout(const cv::Mat& wrinkle_map, const PatchLayout& layout, c
     cv::line(heat, to_px(cx, cy), to_px(cx + half * e.c, cy + half * e.s), cv::Scalar(80, 255, 80), 1, cv::LINE_AA,
              kShift);
   }
+  cv::cvtColor(heat, heat, cv::COLOR_BGR2RGB);  // OpenCV draws BGR; WriteImage writes R, G, B
   return heat;
 }
 

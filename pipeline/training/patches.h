@@ -164,7 +164,9 @@ TrainingPatches ExtractTrainingPatches(const PatchLayout& layout, const std::vec
 // A picture like the paper's Fig. 6 (bottom): the wrinkle map as a heat map
 // (inferno, scaled to its 99.5th percentile of positive values), texels outside
 // `valid` (when given) dimmed, and every patch as an oriented w × w rectangle
-// with a tick from its centre along +e1 (the gradient). CV_8UC3, BGR.
+// with a tick from its centre along +e1 (the gradient): cyan rectangles, green ticks.
+// CV_8UC3, channels R, G, B (for WriteImage; until crease 0.4.2 it returned B, G, R and
+// the pictures it wrote had red and blue swapped).
 cv::Mat DrawPatchLayout(const cv::Mat& wrinkle_map, const PatchLayout& layout, const cv::Mat& valid = cv::Mat());
 
 // Training pairs to look at (issue 17: the raw wrinkle map's pairs turned out to be
