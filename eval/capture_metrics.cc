@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <optional>
 #include <sstream>
@@ -22,10 +23,12 @@
 #include "core/options.h"
 #include "core/ray_caster.h"
 #include "core/uv_raster.h"
+#include "eval/appearance_ceiling.h"
 #include "eval/detail_truth.h"
 #include "eval/tracking_metrics.h"
 #include "pipeline/capture/capture_io.h"
 #include "pipeline/capture/flow_refinement.h"
+#include "pipeline/capture/frame_texture.h"
 #include "pipeline/capture/hifi_mesh.h"
 #include "pipeline/training/wrinkle_map.h"
 #include "eval/rig_correspondence.h"
@@ -37,6 +40,7 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 void CaptureEvalOptions::VisitFields(OptionVisitor& v) {
+  appearance.VisitFields(v);
   v.Field("surface_every", surface_every);
   v.Field("band_mm", band_mm);
   v.Field("detail_truth", detail_truth);
@@ -56,6 +60,7 @@ void CaptureEvalOptions::VisitFields(OptionVisitor& v) {
 
 void CaptureEvalOptions::Check() const {
   const char* o = "CaptureEvalOptions";
+  appearance.Check();
   CheckGe(o, "surface_every", surface_every, 0);
   CheckGt(o, "band_mm", band_mm, 0.0);
   CheckOneOf(o, "detail_truth", detail_truth, {"extraction", "wrinkle-layer"});
@@ -451,6 +456,75 @@ class LkFromTruthMeter {
   double motion_ = 0, error_ = 0, projection_ = 0, motion2_ = 0;
 };
 
+// Rung A of the detail ladder (eval/appearance_ceiling.h): the capture's T^t,
+// re-extracted from the dataset's frame at the capture's L~^t with the capture's
+// texture options, against D* and the wrinkle layer.
+class AppearanceProbe {
+ public:
+  // `frames`: the capture's frames; `frame_path`: a frame's image. Reads the truth
+  // expression of every frame and the textures of the reference frames.
+  AppearanceProbe(const fs::path& capture, const fs::path& dataset, const json& capture_json, const FaceRig& rig,
+                  const FaceRig& truth_rig, const CameraIntrinsics& K, const std::vector<int>& frames,
+                  const std::function<fs::path(int)>& frame_path, const json& info, const cv::Mat& mask,
+                  const AppearanceCeilingOptions& options)
+      : capture_(capture), frame_path_(frame_path) {
+    FrameTextureOptions t;
+    const json o = capture_json.value("options", json::object());
+    t.map_resolution = capture_json.value("map_resolution", t.map_resolution);
+    t.max_view_angle_deg = o.value("max_view_angle_deg", t.max_view_angle_deg);
+    t.depth_tolerance_mm = o.value("depth_tolerance_mm", t.depth_tolerance_mm);
+    t.erode_seen_texels = o.value("erode_seen_texels", t.erode_seen_texels);
+    extractor_ = std::make_unique<FrameTextureExtractor>(rig, K, t);
+    // The reference: the tracked frames with the smallest true |β|.
+    std::vector<std::pair<double, int>> by_expression;
+    for (int index : frames) {
+      const Eigen::VectorXd beta = ReadTruthExpression(truth_rig, dataset / "truth" / fmt::format("{:06d}.json", index));
+      by_expression.emplace_back(beta.norm(), index);
+    }
+    std::sort(by_expression.begin(), by_expression.end());
+    std::vector<cv::Mat> textures, seen;
+    for (const auto& [norm, index] : by_expression) {
+      if (static_cast<int>(textures.size()) == options.reference_frames) break;
+      const FrameTexture tex = Texture(index);
+      if (tex.num_seen == 0) continue;  // not tracked
+      if (textures.empty()) reference_frame_ = index;
+      textures.push_back(tex.gray);
+      seen.push_back(tex.seen);
+    }
+    if (textures.empty()) return;
+    meter_.emplace(MedianTexture(textures, seen), mask, 2, options);
+    // The layer of the most neutral frame: its static lines, which T_ref holds too.
+    reference_layer_ = ReadMap(TruthMapPath(dataset, info, reference_frame_), mask.rows, /*resample=*/true);
+  }
+  // Frame `index` (its capture arrays) with its truth D* (`detail`) and wrinkle layer.
+  void Add(int index, const CaptureFrameArrays& arrays, const cv::Mat& detail, const cv::Mat& layer) {
+    if (!meter_ || !arrays.tracked || !fs::is_regular_file(frame_path_(index))) return;
+    const FrameTexture tex = extractor_->Extract(arrays.refined, ReadLinearFrame(index));
+    if (tex.num_seen > 0) meter_->Add(index, tex.gray, {detail, layer - reference_layer_});
+  }
+  AppearanceCeiling Result() const { return meter_ ? meter_->Result() : AppearanceCeiling(); }
+
+ private:
+  cv::Mat ReadLinearFrame(int index) const {
+    cv::Mat img = ReadImage(frame_path_(index));  // linear RGB
+    if (img.channels() == 1) cv::cvtColor(img, img, cv::COLOR_GRAY2RGB);
+    if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_RGBA2RGB);
+    return img;
+  }
+  FrameTexture Texture(int index) const {
+    const CaptureFrameArrays a = ReadCaptureFrameArrays(capture_ / "frames" / fmt::format("{:06d}.cfr", index));
+    if (!a.tracked || !fs::is_regular_file(frame_path_(index))) return FrameTexture();
+    return extractor_->Extract(a.refined, ReadLinearFrame(index));
+  }
+
+  fs::path capture_;
+  std::function<fs::path(int)> frame_path_;
+  std::unique_ptr<FrameTextureExtractor> extractor_;
+  std::optional<AppearanceCeilingMeter> meter_;
+  int reference_frame_ = -1;
+  cv::Mat reference_layer_;
+};
+
 json FlowStagesJson(const FlowStageErrors& f) {
   return {{"points", f.points},           {"trusted", f.trusted},
           {"recovered", f.recovered},     {"reset", f.reset},
@@ -599,6 +673,11 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
     if (info.contains("files") && info["files"].contains("frame")) pattern = info["files"]["frame"].get<std::string>();
     return dataset / fmt::format(fmt::runtime(pattern), fmt::arg("frame", index));
   };
+  std::optional<AppearanceProbe> appearance;  // rung A of the detail ladder
+  if (options.appearance.enabled && detail_truth) {
+    appearance.emplace(capture, dataset, cap, rig, truth_rig, K, frames, frame_path, info, wrinkle_mask,
+                       options.appearance);
+  }
   MatX2d prev_err_coarse, prev_err_refined;
   cv::Mat prev_band_err, prev_D;
   Eigen::VectorXd prev_beta;
@@ -725,6 +804,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
       if (!options.truth_maps_dir.empty()) {
         WriteImage(fs::path(options.truth_maps_dir) / fmt::format("{:06d}.exr", index), G);
       }
+      if (appearance) appearance->Add(index, arrays, G, layer);
       e.has_displacement = true;
       e.d_face = CompareMaps(D, G, coverage);
       e.d_wrinkle = CompareMaps(D, G, wrinkle_mask);
@@ -888,6 +968,7 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   s.d_layer_band = pooled_layer_band.Result();
   if (d_jitter_frames > 0) s.d_jitter_mm /= d_jitter_frames;
   if (s.still_pairs > 0) s.d_still_correlation /= s.still_pairs;
+  if (appearance) s.appearance = appearance->Result();
   Divide(s.surface_frames, &s.surface_coarse);
   Divide(s.surface_frames, &s.surface_meso);
   Divide(s.surface_frames, &s.surface_full);
@@ -944,6 +1025,12 @@ std::string CaptureEvalSummary::ToJson() const {
   } else {
     j["displacement"]["offset_mm"] = nullptr;
     j["displacement"]["offset_slide_mm"] = nullptr;
+  }
+  if (appearance.measured()) {  // rung A of the detail ladder (eval/appearance_ceiling.h); else absent
+    j["appearance"] = {{"detail_correlation", appearance.correlation[0]},
+                       {"layer_correlation", appearance.correlation[1]},
+                       {"frames", appearance.frames[0] + appearance.frames[1]},
+                       {"samples", appearance.samples[0] + appearance.samples[1]}};
   }
   j["loss"] = {{"lost_visible_frames", lost_visible_frames},
                {"longest_loss_frames", longest_loss_frames},
@@ -1083,6 +1170,13 @@ std::string CaptureEvalSummary::ToMarkdown() const {
       o << fmt::format("D^t on a still face (the true expression held), {} frame pairs: correlation with the previous "
                        "frame's {:.3f} (wrinkle regions)\n",
                        still_pairs, d_still_correlation);
+    }
+    if (appearance.measured()) {
+      o << fmt::format("Appearance ceiling (a linear filter of the capture's own texture T^t/T_ref - 1, fitted on half "
+                       "of {} frames and scored on the other half; no regressor reading these textures can be expected "
+                       "to do better): correlation {:.3f} with the truth, {:.3f} with the wrinkle layer\n",
+                       appearance.frames[0] + appearance.frames[1], appearance.correlation[0],
+                       appearance.correlation[1]);
     }
     if (offset_frames > 0) {
       o << fmt::format("Wrinkle offset (the shift of D^t's lines against the true ones that correlates best; + = "

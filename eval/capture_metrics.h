@@ -37,6 +37,7 @@
 #include "core/camera.h"
 #include "core/ray_caster.h"
 #include "core/tri_mesh.h"
+#include "eval/appearance_ceiling.h"
 #include "pipeline/capture/capture_io.h"
 #include "pipeline/training/detail_extraction.h"
 
@@ -75,6 +76,9 @@ struct CaptureEvalOptions {
   // Wrinkle offset (the slide of Fig. 14): the vertical shift of D^t's wrinkle band
   // against the truth's in this region that maximises their correlation, searched
   // within ±offset_search_mm.
+  // Rung A of the detail ladder: the appearance ceiling (eval/appearance_ceiling.h),
+  // measured when the truth D* is known.
+  AppearanceCeilingOptions appearance;
   std::string offset_region = "forehead";
   double offset_search_mm = 4.0;
   double offset_min_correlation = 0.2;  // below: the lines do not match at any shift; not measured
@@ -192,6 +196,9 @@ struct CaptureEvalSummary {
   // The smallest true_visible_fraction of the sequence (did an occluder cover the face?).
   double min_visible_fraction = 1.0;
   SurfaceError surface_coarse, surface_meso, surface_full;    // means over surface frames
+  // Rung A: a linear filter of the capture's own textures against D* (correlation[0])
+  // and the wrinkle layer beyond the most neutral frame's (correlation[1]).
+  AppearanceCeiling appearance;
   std::string timing_json = "{}";  // copied from the capture's summary
   double fps = 0, tracking_share = 0, detail_share = 0;
   std::vector<FrameCaptureEval> per_frame;

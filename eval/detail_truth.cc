@@ -54,9 +54,7 @@ cv::Mat DetailTruth::Detail(const Eigen::VectorXd& expression) const {
 
 namespace crease {
 
-namespace {
-
-Eigen::VectorXd ScanExpression(const FaceRig& rig, const std::filesystem::path& truth_json) {
+Eigen::VectorXd ReadTruthExpression(const FaceRig& rig, const std::filesystem::path& truth_json) {
   const nlohmann::json j = ReadJsonFile(truth_json);
   Require(j.contains("expression") && j["expression"].is_object(),
           fmt::format("{}: no \"expression\" object", truth_json.string()));
@@ -67,8 +65,6 @@ Eigen::VectorXd ScanExpression(const FaceRig& rig, const std::filesystem::path& 
   }
   return ExpressionVector(rig, named);
 }
-
-}  // namespace
 
 ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, const ExtractionTruthOptions& options) {
   const auto start = std::chrono::steady_clock::now();
@@ -95,7 +91,7 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
     const cv::Mat regions = ValidRegionMask(rig.regions, options.regions, R, extractor.coverage());
     for (size_t j = 0; j < meshes.size(); ++j) {
       const ScanEntry& scan = sa.scans[order[j]];
-      const Eigen::VectorXd beta = ScanExpression(rig, scan.mesh.parent_path() / "truth.json");
+      const Eigen::VectorXd beta = ReadTruthExpression(rig, scan.mesh.parent_path() / "truth.json");
       const ExtractedDetail d = extractor.Extract(meshes[j].V, scan.mesh.string());
       cv::Mat mask, region_mask;
       cv::bitwise_and(extractor.coverage(), d.valid, mask);
@@ -167,7 +163,7 @@ int WriteDetailTruthMaps(const std::filesystem::path& dataset, const DetailExtra
   fs::remove_all(tmp);
   fs::create_directories(tmp);
   for (int i = first; i < first + n; ++i) {
-    const Eigen::VectorXd beta = ScanExpression(rig, dataset / "truth" / fmt::format("{:06d}.json", i));
+    const Eigen::VectorXd beta = ReadTruthExpression(rig, dataset / "truth" / fmt::format("{:06d}.json", i));
     WriteImage(tmp / fmt::format("{:06d}.exr", i), ResampleSquareMap(truth.Detail(beta), detail.map_resolution));
   }
   fs::remove_all(out);

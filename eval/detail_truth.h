@@ -94,6 +94,11 @@ struct ExtractionTruthOptions {
 // each scan truth.json; the set names its rig). Errors name the file.
 ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, const ExtractionTruthOptions& options);
 
+// β of a studio truth file (a scan's truth.json or a sequence's truth/NNNNNN.json:
+// an "expression" object of named weights) as the rig's expression vector. Errors
+// name the file.
+Eigen::VectorXd ReadTruthExpression(const FaceRig& rig, const std::filesystem::path& truth_json);
+
 // The truth D* of frames first_frame … first_frame + frames − 1 of a studio sequence
 // (`crease synth sequence`; frames < 0: all) with the G of `detail`, as R×R maps
 // `out`/NNNNNN.exr (mm; R = detail.map_resolution): what `crease capture --set

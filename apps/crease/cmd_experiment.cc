@@ -100,8 +100,7 @@ void AddExperimentCommands(CLI::App& app) {
     static int seeds = 0, jobs = 1;
     static bool dry_run = false;
     cmd->add_option("experiment", name, "Experiment name (experiments/NAME.yaml), a config file, or all")->required();
-    cmd->add_option("--profile", profile, "quick or paper (the config's profiles)")
-        ->check(CLI::IsMember({"quick", "paper"}));
+    cmd->add_option("--profile", profile, "quick, paper, or another profile the config defines (e.g. detail-ladder's lights)");
     cmd->add_option("--seeds", seeds, "Independent actor sets (overrides the config)");
     cmd->add_option("--jobs,-j", jobs, "Stages run at once")->capture_default_str();
     cmd->add_option("--shard", shard, "Run only slice I of N of the runs (I/N, 1-based)");
