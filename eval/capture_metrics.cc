@@ -6,6 +6,7 @@
 #include <map>
 #include <optional>
 #include <sstream>
+#include <utility>
 
 #include <Eigen/Geometry>
 #include <Eigen/QR>
@@ -580,403 +581,618 @@ SurfaceError MeasureSurface(const TriMesh& h, const RayCaster& truth, double max
   return e;
 }
 
-CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& dataset,
-                                   const CaptureEvalOptions& options) {
-  options.Check();
+namespace {
+
+// The constants of one evaluation: the capture and the dataset, the rigs and their
+// correspondence, the camera, the face chart with its UV masks, and the truth the
+// frames are measured against. Built in place once (members refer to one another:
+// the prior fit and the H^t builder to `rig`), then only read.
+struct CaptureEvalContext {
+  CaptureEvalContext(const fs::path& capture_dir, const fs::path& dataset_dir, const CaptureEvalOptions& o);
+  CaptureEvalContext(const CaptureEvalContext&) = delete;
+  CaptureEvalContext& operator=(const CaptureEvalContext&) = delete;
+
+  // The dataset's image of frame `index`.
+  fs::path FramePath(int index) const {
+    std::string pattern = "frames/{frame:06d}.png";
+    if (info.contains("files") && info["files"].contains("frame")) pattern = info["files"]["frame"].get<std::string>();
+    return dataset / fmt::format(fmt::runtime(pattern), fmt::arg("frame", index));
+  }
+  // The fraction of the face-chart vertices visible in the ground truth (`vertex_visible`: #V).
+  double VisibleFraction(const std::vector<char>& vertex_visible) const {
+    int seen = 0;
+    for (int i : face_ids) seen += vertex_visible[i] ? 1 : 0;
+    return face_ids.empty() ? 0.0 : double(seen) / face_ids.size();
+  }
+
+  fs::path capture, dataset;
+  const CaptureEvalOptions& options;
+  json cap, info;          // capture.json, dataset.json
+  FaceRig truth_rig, rig;  // the dataset's rig; the compatible rig capture used
+  // A capture with another rig than the dataset's is measured through a surface
+  // correspondence; D^t, in the other rig's UV layout, is then not compared.
+  RigCorrespondence corr;
+  CameraIntrinsics K;
+  Camera cam;
+  // Face-chart vertices of the rig (those with a truth correspondence), as ids and as a mask.
+  std::vector<int> face_ids;
+  std::vector<char> evaluated;
+  // UV maps of the face chart, R×R (the capture's map resolution).
+  int R = 0;
+  cv::Mat coverage, wrinkle_mask, offset_mask;
+  double mm_per_texel = 0;
+  WrinkleBandMask band_mask;
+  int offset_shift = 0;  // texels, the wrinkle offset's search range
+  // The truth moves with the actor's personal rig (its expression deviations),
+  // which the tracking rig (the capture's) cannot represent exactly.
+  fs::path actor_path;
+  std::optional<Actor> truth_actor;
+  FaceRig truth_motion;
+  std::optional<RigPriorFit> prior;
+  // The true high-resolution surface and H^t's builder (surface_every > 0).
+  std::optional<ActorModel> actor;
+  std::unique_ptr<HifiMeshBuilder> hifi;
+  cv::Mat meso;
+  // The truth of D^t when it is Sec. 4.1's detail; null: the wrinkle-layer maps.
+  std::unique_ptr<DetailTruth> detail_truth;
+  std::vector<int> frames;  // the capture's frames evaluated
+  int vectors_target = -1;  // the error-vector picture's frame
+
+ private:
+  void ReadInputs();
+  void SetUpFaceChart();
+  void SetUpTruthMotion();
+  void SetUpSurfaceTruth();
+  void SelectFrames();
+  void SetUpDetailTruth();
+};
+
+CaptureEvalContext::CaptureEvalContext(const fs::path& capture_dir, const fs::path& dataset_dir,
+                                       const CaptureEvalOptions& o)
+    : capture(capture_dir), dataset(dataset_dir), options(o) {
+  ReadInputs();
+  SetUpFaceChart();
+  SetUpTruthMotion();
+  SetUpSurfaceTruth();
+  SelectFrames();
+  SetUpDetailTruth();
+  if (!options.truth_maps_dir.empty()) fs::create_directories(options.truth_maps_dir);
+}
+
+void CaptureEvalContext::ReadInputs() {
   const fs::path capture_json = capture / "capture.json";
   Require(fs::is_regular_file(capture_json),
           fmt::format("{}: missing; is {} a `crease capture` folder?", capture_json.string(), capture.string()));
   const fs::path dataset_json = dataset / "dataset.json";
   Require(fs::is_regular_file(dataset_json),
           fmt::format("{}: missing; is {} a `crease synth sequence` dataset?", dataset_json.string(), dataset.string()));
-  const json cap = ReadJsonFile(capture_json);
-  const json info = ReadJsonFile(dataset_json);
+  cap = ReadJsonFile(capture_json);
+  info = ReadJsonFile(dataset_json);
+  truth_rig = ReadRig(dataset / "rig.crig");
+  rig = ReadRig(capture / "rig.crig");
+  corr = CorrespondRigs(rig, truth_rig);
+  K = ReadCamera(dataset / "camera.json").intrinsics;
+  cam = Camera(K, Rigid3d());
+}
 
-  const FaceRig truth_rig = ReadRig(dataset / "rig.crig");
-  const FaceRig rig = ReadRig(capture / "rig.crig");  // the compatible rig capture used
-  // A capture with another rig than the dataset's is measured through a surface
-  // correspondence; D^t, in the other rig's UV layout, is then not compared.
-  const RigCorrespondence corr = CorrespondRigs(rig, truth_rig);
-  const CameraIntrinsics K = ReadCamera(dataset / "camera.json").intrinsics;
-  const Camera cam(K, Rigid3d());
-
-  // Face-chart vertices and UV maps of the rig.
+void CaptureEvalContext::SetUpFaceChart() {
   const MatX3i face_F = FaceChartTriangles(rig);
   std::vector<char> on_face(static_cast<size_t>(rig.num_vertices()), 0);
   for (int f = 0; f < face_F.rows(); ++f)
     for (int k = 0; k < 3; ++k) on_face[face_F(f, k)] = 1;
-  std::vector<int> face_ids;
   for (int i = 0; i < rig.num_vertices(); ++i)
     if (on_face[i] && corr.Has(i)) face_ids.push_back(i);
+  evaluated.assign(static_cast<size_t>(rig.num_vertices()), 0);
+  for (int i : face_ids) evaluated[i] = 1;
   TriMesh face_mesh = rig.neutral;
   face_mesh.F = face_F;
-  const int R = cap.value("map_resolution", 1024);
-  const cv::Mat coverage = CoverageMask(RasterizeUv(face_mesh, R, R, "rig face chart"));
-  const cv::Mat wrinkle_mask = ValidRegionMask(rig.regions, options.wrinkle_regions, R, coverage);
-  const double mm_per_texel = std::max(MmPerTexel(face_mesh, R), 1e-9);
-  const WrinkleBandMask band_mask = MakeWrinkleBandMask(coverage, options.band_mm / mm_per_texel);
-  const cv::Mat offset_mask = ValidRegionMask(rig.regions, {options.offset_region}, R, coverage);
-  const int offset_shift = static_cast<int>(std::lround(options.offset_search_mm / mm_per_texel));
+  R = cap.value("map_resolution", 1024);
+  coverage = CoverageMask(RasterizeUv(face_mesh, R, R, "rig face chart"));
+  wrinkle_mask = ValidRegionMask(rig.regions, options.wrinkle_regions, R, coverage);
+  mm_per_texel = std::max(MmPerTexel(face_mesh, R), 1e-9);
+  band_mask = MakeWrinkleBandMask(coverage, options.band_mm / mm_per_texel);
+  offset_mask = ValidRegionMask(rig.regions, {options.offset_region}, R, coverage);
+  offset_shift = static_cast<int>(std::lround(options.offset_search_mm / mm_per_texel));
+}
 
-  // The truth moves with the actor's personal rig (its expression deviations),
-  // which the tracking rig (the capture's) cannot represent exactly.
-  const fs::path actor_path = dataset / "actor.json";
-  const std::optional<Actor> truth_actor =
-      fs::is_regular_file(actor_path) ? std::optional<Actor>(ReadActor(actor_path)) : std::nullopt;
-  const FaceRig truth_motion = truth_actor ? PersonalRig(truth_rig, *truth_actor) : truth_rig;
+void CaptureEvalContext::SetUpTruthMotion() {
+  actor_path = dataset / "actor.json";
+  truth_actor = fs::is_regular_file(actor_path) ? std::optional<Actor>(ReadActor(actor_path)) : std::nullopt;
+  truth_motion = truth_actor ? PersonalRig(truth_rig, *truth_actor) : truth_rig;
   Eigen::VectorXd known_identity;  // the actor's α, when the tracking rig shares the truth's identity modes
   if (truth_actor && corr.same_uv) {
     known_identity = ZeroPadded(truth_actor->identity, rig.num_identity());
   }
-  const RigPriorFit prior(rig, face_ids, known_identity);
+  prior.emplace(rig, face_ids, known_identity);
+}
 
-  std::optional<ActorModel> actor;
-  std::unique_ptr<HifiMeshBuilder> hifi;
-  cv::Mat meso;
-  if (options.surface_every > 0) {
-    Require(truth_actor.has_value(), fmt::format("{}: missing (needed for the surface metrics)", actor_path.string()));
-    actor.emplace(truth_rig, *truth_actor);
-    HifiMeshOptions ho;
-    ho.hifi_mesh_resolution = options.surface_mesh_resolution;
-    hifi = std::make_unique<HifiMeshBuilder>(rig, ho);
-    const fs::path meso_path = capture / "maps" / "mesoscopic.exr";
-    meso = fs::is_regular_file(meso_path) ? ReadMap(meso_path, R) : cv::Mat::zeros(R, R, CV_32F);
-  }
+void CaptureEvalContext::SetUpSurfaceTruth() {
+  if (options.surface_every <= 0) return;
+  Require(truth_actor.has_value(), fmt::format("{}: missing (needed for the surface metrics)", actor_path.string()));
+  actor.emplace(truth_rig, *truth_actor);
+  HifiMeshOptions ho;
+  ho.hifi_mesh_resolution = options.surface_mesh_resolution;
+  hifi = std::make_unique<HifiMeshBuilder>(rig, ho);
+  const fs::path meso_path = capture / "maps" / "mesoscopic.exr";
+  meso = fs::is_regular_file(meso_path) ? ReadMap(meso_path, R) : cv::Mat::zeros(R, R, CV_32F);
+}
 
-  CaptureEvalSummary s;
-  s.capture = capture.string();
-  s.dataset = dataset.string();
-  std::vector<int> frames = cap.at("frame_indices").get<std::vector<int>>();
+void CaptureEvalContext::SelectFrames() {
+  frames = cap.at("frame_indices").get<std::vector<int>>();
   if (options.max_frames >= 0 && static_cast<int>(frames.size()) > options.max_frames) frames.resize(options.max_frames);
+  vectors_target = options.vectors_frame >= 0 ? options.vectors_frame
+                   : frames.empty()            ? -1
+                                               : frames[frames.size() / 2];
+}
 
-  MapMoments pooled_face, pooled_wrinkle, pooled_band, pooled_layer_band;
-  // The truth of D^t: Sec. 4.1's detail with the model's G (recorded in capture.json
-  // by crease ≥ 0.4; the defaults before), or the wrinkle-layer maps.
-  s.detail_truth = options.detail_truth;
-  std::unique_ptr<DetailTruth> detail_truth;
-  if (options.detail_truth == "extraction" && corr.same_uv) {
-    Require(truth_actor.has_value(), fmt::format("{}: missing; detail_truth = extraction needs the actor (or use "
-                                                 "detail_truth = wrinkle-layer)",
-                                                 actor_path.string()));
-    DetailExtractionOptions g;
-    if (cap.contains("detail_extraction")) {
-      SetOptionsFromJson(cap["detail_extraction"].dump(), (capture / "capture.json").string(), &g);
-    }
-    detail_truth = std::make_unique<DetailTruth>(truth_rig, *truth_actor, g);
+// The truth of D^t: Sec. 4.1's detail with the model's G (recorded in capture.json
+// by crease ≥ 0.4; the defaults before), or the wrinkle-layer maps.
+void CaptureEvalContext::SetUpDetailTruth() {
+  if (options.detail_truth != "extraction" || !corr.same_uv) return;
+  Require(truth_actor.has_value(), fmt::format("{}: missing; detail_truth = extraction needs the actor (or use "
+                                               "detail_truth = wrinkle-layer)",
+                                               actor_path.string()));
+  DetailExtractionOptions g;
+  if (cap.contains("detail_extraction")) {
+    SetOptionsFromJson(cap["detail_extraction"].dump(), (capture / "capture.json").string(), &g);
   }
-  if (!options.truth_maps_dir.empty()) fs::create_directories(options.truth_maps_dir);
-  LkFromTruthMeter lk_meter(cap.contains("options") ? cap["options"] : json::object());
-  std::vector<char> evaluated(static_cast<size_t>(rig.num_vertices()), 0);  // face_ids as a mask
-  for (int i : face_ids) evaluated[i] = 1;
-  auto frame_path = [&](int index) {
-    std::string pattern = "frames/{frame:06d}.png";
-    if (info.contains("files") && info["files"].contains("frame")) pattern = info["files"]["frame"].get<std::string>();
-    return dataset / fmt::format(fmt::runtime(pattern), fmt::arg("frame", index));
-  };
+  detail_truth = std::make_unique<DetailTruth>(truth_rig, *truth_actor, g);
+}
+
+// What a tracked frame leaves for the next: the jitter and still-face metrics
+// compare consecutive frames.
+struct PreviousFrame {
+  int frame = -2;                   // −2: none (the last frame was not tracked)
+  MatX2d err_coarse, err_refined;   // 2D error vectors of L^t and L~^t
+  cv::Mat band_err, D;              // D^t's band minus the truth's; D^t (empty: none)
+  Eigen::VectorXd beta;             // the true expression
+};
+
+// What the frame loop accumulates over the frames.
+struct FrameLoopState {
+  explicit FrameLoopState(const CaptureEvalContext& c)
+      : lk_meter(c.cap.contains("options") ? c.cap["options"] : json::object()) {
+    if (c.options.appearance.enabled && c.detail_truth) {
+      appearance.emplace(c.capture, c.dataset, c.cap, c.rig, c.truth_rig, c.K, c.frames,
+                         [&c](int index) { return c.FramePath(index); }, c.info, c.wrinkle_mask,
+                         c.options.appearance);
+    }
+  }
+
+  LkFromTruthMeter lk_meter;
   std::optional<AppearanceProbe> appearance;  // rung A of the detail ladder
-  if (options.appearance.enabled && detail_truth) {
-    appearance.emplace(capture, dataset, cap, rig, truth_rig, K, frames, frame_path, info, wrinkle_mask,
-                       options.appearance);
+  // Displacement pooled over the active frames (and those where the wrinkle layer is active).
+  MapMoments pooled_face, pooled_wrinkle, pooled_band, pooled_layer_band;
+  int active_frames = 0, layer_active_frames = 0;
+  cv::Mat error_vectors;  // Fig. 11's picture, once drawn
+  int error_vectors_frame = -1;
+  int tracked_count = 0;
+  PreviousFrame previous;
+};
+
+// A tracked frame's truth at the tracking rig's vertices (head frame of the truth
+// rig, then camera) and the tracking rig's best fit to it.
+struct RigTruth {
+  FrameTruth truth;
+  Eigen::VectorXd beta;        // the true expression
+  MatX3d true_cam, prior_cam;  // #V×3, camera frame, mm
+};
+
+RigTruth ReadRigTruth(const CaptureEvalContext& c, int index) {
+  RigTruth t;
+  t.truth = c.corr.MapTruth(ReadFrameTruth(c.dataset, index, c.truth_rig.num_vertices()));
+  const Eigen::VectorXd identity = TruthIdentity(c.truth_rig, t.truth);
+  t.beta = ExpressionVector(c.truth_rig, t.truth.expression);
+  const MatX3d true_head = c.corr.Map(c.truth_motion.EvaluatePositions(identity, t.beta));
+  t.true_cam = Transform(t.truth.cam_from_head, true_head);
+  t.prior_cam =
+      Transform(t.truth.cam_from_head, c.corr.FromTrackingFrame(c.prior->Fit(c.corr.ToTrackingFrame(true_head))));
+  return t;
+}
+
+// What the later steps of a frame use of its tracking errors: the 2D error vectors
+// of L^t and L~^t (#V×2 px, NaN off the visible face-chart vertices), those
+// vertices, and L~^t rigidly aligned to the truth (#V×3, camera frame).
+struct FrameTrackingVectors {
+  MatX2d err_coarse, err_refined;
+  std::vector<int> visible;
+  MatX3d refined_aligned;
+};
+
+// 2D vertex errors of L^t, L~^t and the prior over the visible face-chart vertices.
+FrameTrackingVectors MeasureVertexErrors2d(const CaptureEvalContext& c, const CaptureFrameArrays& arrays,
+                                           const RigTruth& t, FrameCaptureEval* e) {
+  FrameTrackingVectors v;
+  v.err_coarse.resize(c.rig.num_vertices(), 2);
+  v.err_coarse.setConstant(std::numeric_limits<double>::quiet_NaN());
+  v.err_refined = v.err_coarse;
+  double sc = 0, sr = 0;
+  for (int i : c.face_ids) {
+    if (!t.truth.vertex_visible[i]) continue;
+    const Eigen::RowVector2d p = t.truth.vertices.row(i);
+    v.err_coarse.row(i) = c.cam.ProjectCamPoint(arrays.coarse.row(i).transpose()).transpose() - p;
+    v.err_refined.row(i) = c.cam.ProjectCamPoint(arrays.refined.row(i).transpose()).transpose() - p;
+    e->prior_px += (c.cam.ProjectCamPoint(t.prior_cam.row(i).transpose()).transpose() - p).norm();
+    sc += v.err_coarse.row(i).norm();
+    sr += v.err_refined.row(i).norm();
+    v.visible.push_back(i);
   }
-  MatX2d prev_err_coarse, prev_err_refined;
-  cv::Mat prev_band_err, prev_D;
-  Eigen::VectorXd prev_beta;
-  int prev_frame = -2, tracked_count = 0;
-  const int vectors_target = options.vectors_frame >= 0 ? options.vectors_frame
-                             : frames.empty()            ? -1
-                                                         : frames[frames.size() / 2];
-  // The fraction of the face-chart vertices visible in the ground truth.
-  auto visible_fraction = [&](const auto& vertex_visible) {
-    int seen = 0;
-    for (int i : face_ids) seen += vertex_visible[i] ? 1 : 0;
-    return face_ids.empty() ? 0.0 : double(seen) / face_ids.size();
-  };
-  for (int index : frames) {
-    FrameCaptureEval e;
-    e.frame = index;
-    const CaptureFrameArrays arrays = ReadCaptureFrameArrays(capture / "frames" / fmt::format("{:06d}.cfr", index));
-    e.tracked = arrays.tracked;
-    if (!e.tracked) {
-      // Was the face there to be tracked? (the loss metrics)
-      e.true_visible_fraction =
-          visible_fraction(corr.MapTruth(ReadFrameTruth(dataset, index, truth_rig.num_vertices())).vertex_visible);
-      prev_frame = -2;
-      s.per_frame.push_back(e);
-      continue;
-    }
-    Require(arrays.coarse.rows() == rig.num_vertices(),
-            fmt::format("{}: {} vertices, the rig has {}", (capture / "frames").string(), arrays.coarse.rows(),
-                        rig.num_vertices()));
-    ++tracked_count;
-    const FrameTruth truth = corr.MapTruth(ReadFrameTruth(dataset, index, truth_rig.num_vertices()));
-    const Eigen::VectorXd identity = TruthIdentity(truth_rig, truth);
-    const Eigen::VectorXd beta = ExpressionVector(truth_rig, truth.expression);
-    // The truth at the tracking rig's vertices (head frame of the truth rig, then camera).
-    const MatX3d true_head = corr.Map(truth_motion.EvaluatePositions(identity, beta));
-    const MatX3d true_cam = Transform(truth.cam_from_head, true_head);
-    const MatX3d prior_cam =
-        Transform(truth.cam_from_head, corr.FromTrackingFrame(prior.Fit(corr.ToTrackingFrame(true_head))));
-    e.prior_mm = MeanDistance(prior_cam, true_cam, face_ids);
-
-    // 2D and 3D vertex errors over the visible face-chart vertices.
-    MatX2d err_c(rig.num_vertices(), 2), err_r(rig.num_vertices(), 2);
-    err_c.setConstant(std::numeric_limits<double>::quiet_NaN());
-    err_r = err_c;
-    double sc = 0, sr = 0;
-    std::vector<int> visible;
-    for (int i : face_ids) {
-      if (!truth.vertex_visible[i]) continue;
-      const Eigen::RowVector2d t = truth.vertices.row(i);
-      err_c.row(i) = cam.ProjectCamPoint(arrays.coarse.row(i).transpose()).transpose() - t;
-      err_r.row(i) = cam.ProjectCamPoint(arrays.refined.row(i).transpose()).transpose() - t;
-      e.prior_px += (cam.ProjectCamPoint(prior_cam.row(i).transpose()).transpose() - t).norm();
-      sc += err_c.row(i).norm();
-      sr += err_r.row(i).norm();
-      visible.push_back(i);
-    }
-    e.visible_vertices = static_cast<int>(visible.size());
-    if (!arrays.flow_vertex.empty()) {
-      e.flow = MeasureFlowStages(arrays, cam, truth.vertices, truth.vertex_visible, evaluated);
-      e.has_flow = e.flow.points > 0;
-    }
-    e.true_visible_fraction = visible_fraction(truth.vertex_visible);
-    if (!visible.empty()) {
-      e.coarse_px = sc / visible.size();
-      e.refined_px = sr / visible.size();
-      e.prior_px /= visible.size();
-    }
-    // The frame (sRGB-encoded RGB in [0, 1]), read once for LK and the error vectors.
-    const bool draw_vectors =
-        s.error_vectors.empty() && vectors_target >= 0 && index >= vectors_target && !visible.empty();
-    cv::Mat img;
-    if ((!arrays.flow_vertex.empty() || draw_vectors) && fs::is_regular_file(frame_path(index))) {
-      img = ReadImage(frame_path(index), /*srgb=*/false);
-      if (img.channels() == 1) cv::cvtColor(img, img, cv::COLOR_GRAY2RGB);
-      if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_RGBA2RGB);
-    }
-    if (!arrays.flow_vertex.empty() && !img.empty()) {
-      cv::Mat gray, gray8;
-      cv::cvtColor(img, gray, cv::COLOR_RGB2GRAY);
-      gray.convertTo(gray8, CV_8U, 255.0);
-      lk_meter.Add(index, gray8, truth, arrays.flow_vertex);
-    } else {
-      lk_meter.Skip();
-    }
-    if (draw_vectors) {
-      if (!img.empty()) {
-        cv::Mat rgb8;
-        img.convertTo(rgb8, CV_8U, 255.0);
-        s.error_vectors = DrawErrorVectors(rgb8, truth.vertices, err_c, err_r, visible, e.coarse_px, e.refined_px,
-                                           options.vectors_scale);
-        s.error_vectors_frame = index;
-      }
-    }
-    e.coarse_mm = MeanDistance(arrays.coarse, true_cam, face_ids);
-    e.refined_mm = MeanDistance(arrays.refined, true_cam, face_ids);
-    const Rigid3d align_c = Kabsch(arrays.coarse, true_cam, face_ids);
-    const Rigid3d align_r = Kabsch(arrays.refined, true_cam, face_ids);
-    const MatX3d refined_aligned = Transform(align_r, arrays.refined);
-    e.coarse_aligned_mm = MeanDistance(Transform(align_c, arrays.coarse), true_cam, face_ids);
-    e.refined_aligned_mm = MeanDistance(refined_aligned, true_cam, face_ids);
-    if (prev_frame == index - 1 && prev_err_coarse.rows() == err_c.rows()) {
-      double jc = 0, jr = 0;
-      int n = 0;
-      for (int i : visible) {
-        if (!prev_err_coarse.row(i).allFinite()) continue;
-        jc += (err_c.row(i) - prev_err_coarse.row(i)).norm();
-        jr += (err_r.row(i) - prev_err_refined.row(i)).norm();
-        ++n;
-      }
-      if (n > 0) {
-        e.coarse_jitter_px = jc / n;
-        e.refined_jitter_px = jr / n;
-      }
-    }
-
-    // D^t against the truth.
-    const fs::path d_path = capture / "displacement" / fmt::format("{:06d}.exr", index);
-    cv::Mat band_err;
-    cv::Mat D;
-    if (corr.same_uv && fs::is_regular_file(d_path)) {
-      D = ReadMap(d_path, R);
-      const cv::Mat layer = ReadMap(TruthMapPath(dataset, info, index), R, /*resample=*/true);
-      const cv::Mat G = detail_truth ? ResampleSquareMap(detail_truth->Detail(beta), R) : layer;
-      if (!options.truth_maps_dir.empty()) {
-        WriteImage(fs::path(options.truth_maps_dir) / fmt::format("{:06d}.exr", index), G);
-      }
-      if (appearance) appearance->Add(index, arrays, G, layer);
-      e.has_displacement = true;
-      e.d_face = CompareMaps(D, G, coverage);
-      e.d_wrinkle = CompareMaps(D, G, wrinkle_mask);
-      const cv::Mat Db = WrinkleBand(D, band_mask), Gb = WrinkleBand(G, band_mask);
-      e.d_face_band = CompareMaps(Db, Gb, coverage);
-      e.d_wrinkle_band = CompareMaps(Db, Gb, wrinkle_mask);
-      band_err = Db - Gb;
-      if (cv::countNonZero(offset_mask) > 0 &&
-          CompareMaps(Db, Gb, offset_mask).reference_rms_mm >= options.active_reference_rms_mm) {
-        int shift = 0;
-        if (BestVerticalOffset(Db, Gb, offset_mask, offset_shift, &shift, &e.d_offset_correlation) &&
-            e.d_offset_correlation >= options.offset_min_correlation) {
-          e.has_offset = true;
-          e.d_offset_mm = shift * mm_per_texel;  // +: D^t's lines lie higher (v grows downwards)
-        }
-      }
-      if (detail_truth) {  // the dataset's wrinkle layer, static lines included (the truth of crease ≤ 0.3)
-        const cv::Mat Lb = WrinkleBand(layer, band_mask);
-        if (CompareMaps(Db, Lb, wrinkle_mask).reference_rms_mm >= options.active_reference_rms_mm) {
-          ++s.layer_active_frames;
-          pooled_layer_band.Add(Db, Lb, wrinkle_mask);
-        }
-      }
-      if (e.d_wrinkle_band.reference_rms_mm >= options.active_reference_rms_mm) {
-        ++s.active_frames;
-        pooled_face.Add(D, G, coverage);
-        pooled_wrinkle.Add(D, G, wrinkle_mask);
-        pooled_band.Add(Db, Gb, wrinkle_mask);
-      }
-      if (prev_frame == index - 1 && !prev_band_err.empty()) {
-        const cv::Mat diff = band_err - prev_band_err;
-        double sum = 0;
-        int n = 0;
-        for (int j = 0; j < R; ++j) {
-          const float* p = diff.ptr<float>(j);
-          const uint8_t* m = wrinkle_mask.ptr<uint8_t>(j);
-          for (int i = 0; i < R; ++i) {
-            if (!m[i] || !std::isfinite(p[i])) continue;
-            sum += static_cast<double>(p[i]) * p[i];
-            ++n;
-          }
-        }
-        e.d_jitter_mm = n ? std::sqrt(sum / n) : 0.0;
-      }
-      if (prev_frame == index - 1 && !prev_D.empty() && prev_beta.size() == beta.size() &&
-          (beta - prev_beta).cwiseAbs().maxCoeff() < 1e-6) {
-        const MapComparison c = CompareMaps(D, prev_D, wrinkle_mask);
-        e.still = c.extracted_rms_mm > 0 && c.reference_rms_mm > 0;  // no patch, no detail: nothing to compare
-        e.d_still_correlation = c.correlation;
-      }
-    }
-
-    // H^t against the true high-resolution surface (every surface_every-th tracked frame).
-    if (actor && (tracked_count - 1) % options.surface_every == 0) {
-      TriMesh truth_hires = actor->Frame(beta, true).hires;
-      truth_hires.V = Transform(truth.cam_from_head, truth_hires.V);
-      const RayCaster caster(truth_hires);
-      const cv::Mat zero = cv::Mat::zeros(R, R, CV_32F);
-      const double max_mm = options.surface_max_distance_mm;
-      e.surface_coarse = MeasureSurface(hifi->Build(refined_aligned, zero), caster, max_mm, wrinkle_mask);
-      e.surface_meso = MeasureSurface(hifi->Build(refined_aligned, meso), caster, max_mm, wrinkle_mask);
-      if (!D.empty()) {
-        e.surface_full = MeasureSurface(hifi->Build(refined_aligned, D + meso), caster, max_mm, wrinkle_mask);
-      }
-      e.has_surface = true;
-    }
-
-    prev_err_coarse = err_c;
-    prev_err_refined = err_r;
-    prev_band_err = band_err;
-    prev_D = D;
-    prev_beta = beta;
-    prev_frame = index;
-    s.per_frame.push_back(e);
+  e->visible_vertices = static_cast<int>(v.visible.size());
+  if (!v.visible.empty()) {
+    e->coarse_px = sc / v.visible.size();
+    e->refined_px = sr / v.visible.size();
+    e->prior_px /= v.visible.size();
   }
+  return v;
+}
 
-  // Loss and recovery; wrinkle offset and slide.
+// 3D vertex errors over the face-chart vertices (camera frame), raw and after the
+// rigid alignment to the truth; returns L~^t aligned.
+MatX3d MeasureVertexErrors3d(const CaptureEvalContext& c, const CaptureFrameArrays& arrays, const RigTruth& t,
+                             FrameCaptureEval* e) {
+  e->prior_mm = MeanDistance(t.prior_cam, t.true_cam, c.face_ids);
+  e->coarse_mm = MeanDistance(arrays.coarse, t.true_cam, c.face_ids);
+  e->refined_mm = MeanDistance(arrays.refined, t.true_cam, c.face_ids);
+  const Rigid3d align_c = Kabsch(arrays.coarse, t.true_cam, c.face_ids);
+  const Rigid3d align_r = Kabsch(arrays.refined, t.true_cam, c.face_ids);
+  MatX3d refined_aligned = Transform(align_r, arrays.refined);
+  e->coarse_aligned_mm = MeanDistance(Transform(align_c, arrays.coarse), t.true_cam, c.face_ids);
+  e->refined_aligned_mm = MeanDistance(refined_aligned, t.true_cam, c.face_ids);
+  return refined_aligned;
+}
+
+// The frame (sRGB-encoded RGB in [0, 1]) when `needed` and on disk; else empty.
+cv::Mat ReadFrameRgb(const CaptureEvalContext& c, int index, bool needed) {
+  cv::Mat img;
+  if (needed && fs::is_regular_file(c.FramePath(index))) {
+    img = ReadImage(c.FramePath(index), /*srgb=*/false);
+    if (img.channels() == 1) cv::cvtColor(img, img, cv::COLOR_GRAY2RGB);
+    if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_RGBA2RGB);
+  }
+  return img;
+}
+
+// LK from the true positions (issue 16): this frame's step, or a break in the chain.
+void AddLkStep(int index, const cv::Mat& img, const FrameTruth& truth, const CaptureFrameArrays& arrays,
+               LkFromTruthMeter* meter) {
+  if (arrays.flow_vertex.empty() || img.empty()) {
+    meter->Skip();
+    return;
+  }
+  cv::Mat gray, gray8;
+  cv::cvtColor(img, gray, cv::COLOR_RGB2GRAY);
+  gray.convertTo(gray8, CV_8U, 255.0);
+  meter->Add(index, gray8, truth, arrays.flow_vertex);
+}
+
+// The tracking jitter: the mean change of the 2D error vectors since the previous
+// frame, over this frame's visible vertices that were visible there too.
+void MeasureTrackingJitter(const PreviousFrame& prev, int index, const FrameTrackingVectors& v, FrameCaptureEval* e) {
+  if (prev.frame != index - 1 || prev.err_coarse.rows() != v.err_coarse.rows()) return;
+  double jc = 0, jr = 0;
+  int n = 0;
+  for (int i : v.visible) {
+    if (!prev.err_coarse.row(i).allFinite()) continue;
+    jc += (v.err_coarse.row(i) - prev.err_coarse.row(i)).norm();
+    jr += (v.err_refined.row(i) - prev.err_refined.row(i)).norm();
+    ++n;
+  }
+  if (n > 0) {
+    e->coarse_jitter_px = jc / n;
+    e->refined_jitter_px = jr / n;
+  }
+}
+
+// Tracking (Fig. 11): 2D and 3D vertex errors, the refinement's stages at its flow
+// points, LK from the truth, the error-vector picture, and the jitter.
+FrameTrackingVectors EvaluateFrameTracking(const CaptureEvalContext& c, int index, const CaptureFrameArrays& arrays,
+                                           const RigTruth& t, FrameLoopState* st, FrameCaptureEval* e) {
+  FrameTrackingVectors v = MeasureVertexErrors2d(c, arrays, t, e);
+  if (!arrays.flow_vertex.empty()) {
+    e->flow = MeasureFlowStages(arrays, c.cam, t.truth.vertices, t.truth.vertex_visible, c.evaluated);
+    e->has_flow = e->flow.points > 0;
+  }
+  e->true_visible_fraction = c.VisibleFraction(t.truth.vertex_visible);
+  // The frame, read once for LK and the error vectors.
+  const bool draw_vectors =
+      st->error_vectors.empty() && c.vectors_target >= 0 && index >= c.vectors_target && !v.visible.empty();
+  const cv::Mat img = ReadFrameRgb(c, index, !arrays.flow_vertex.empty() || draw_vectors);
+  AddLkStep(index, img, t.truth, arrays, &st->lk_meter);
+  if (draw_vectors && !img.empty()) {
+    cv::Mat rgb8;
+    img.convertTo(rgb8, CV_8U, 255.0);
+    st->error_vectors = DrawErrorVectors(rgb8, t.truth.vertices, v.err_coarse, v.err_refined, v.visible,
+                                         e->coarse_px, e->refined_px, c.options.vectors_scale);
+    st->error_vectors_frame = index;
+  }
+  v.refined_aligned = MeasureVertexErrors3d(c, arrays, t, e);
+  MeasureTrackingJitter(st->previous, index, v, e);
+  return v;
+}
+
+// The wrinkle offset (Fig. 14) in offset_region, on a frame where the truth's band is active there.
+void MeasureWrinkleOffset(const CaptureEvalContext& c, const cv::Mat& Db, const cv::Mat& Gb, FrameCaptureEval* e) {
+  const bool active = cv::countNonZero(c.offset_mask) > 0 &&
+                      CompareMaps(Db, Gb, c.offset_mask).reference_rms_mm >= c.options.active_reference_rms_mm;
+  if (!active) return;
+  int shift = 0;
+  if (BestVerticalOffset(Db, Gb, c.offset_mask, c.offset_shift, &shift, &e->d_offset_correlation) &&
+      e->d_offset_correlation >= c.options.offset_min_correlation) {
+    e->has_offset = true;
+    e->d_offset_mm = shift * c.mm_per_texel;  // +: D^t's lines lie higher (v grows downwards)
+  }
+}
+
+// Pools the frame's band (Db) into the displacement metrics of the frames where
+// it is active: against the truth (D, G, Gb) and against the dataset's wrinkle layer
+// (`layer`, static lines included: the truth of crease ≤ 0.3) when the truth is D*.
+void PoolDisplacement(const CaptureEvalContext& c, const cv::Mat& D, const cv::Mat& G, const cv::Mat& Db,
+                      const cv::Mat& Gb, const cv::Mat& layer, const FrameCaptureEval& e, FrameLoopState* st) {
+  if (c.detail_truth) {
+    const cv::Mat Lb = WrinkleBand(layer, c.band_mask);
+    if (CompareMaps(Db, Lb, c.wrinkle_mask).reference_rms_mm >= c.options.active_reference_rms_mm) {
+      ++st->layer_active_frames;
+      st->pooled_layer_band.Add(Db, Lb, c.wrinkle_mask);
+    }
+  }
+  if (e.d_wrinkle_band.reference_rms_mm >= c.options.active_reference_rms_mm) {
+    ++st->active_frames;
+    st->pooled_face.Add(D, G, c.coverage);
+    st->pooled_wrinkle.Add(D, G, c.wrinkle_mask);
+    st->pooled_band.Add(Db, Gb, c.wrinkle_mask);
+  }
+}
+
+// D^t's jitter: the RMS of the change of the band error since the previous frame
+// over the wrinkle regions, mm.
+void MeasureDisplacementJitter(const CaptureEvalContext& c, const PreviousFrame& prev, int index,
+                               const cv::Mat& band_err, FrameCaptureEval* e) {
+  if (prev.frame != index - 1 || prev.band_err.empty()) return;
+  const cv::Mat diff = band_err - prev.band_err;
+  double sum = 0;
+  int n = 0;
+  for (int j = 0; j < c.R; ++j) {
+    const float* p = diff.ptr<float>(j);
+    const uint8_t* m = c.wrinkle_mask.ptr<uint8_t>(j);
+    for (int i = 0; i < c.R; ++i) {
+      if (!m[i] || !std::isfinite(p[i])) continue;
+      sum += static_cast<double>(p[i]) * p[i];
+      ++n;
+    }
+  }
+  e->d_jitter_mm = n ? std::sqrt(sum / n) : 0.0;
+}
+
+// Still face: the true expression held since the previous frame; D^t against the previous D^t.
+void MeasureStillFace(const CaptureEvalContext& c, const PreviousFrame& prev, int index, const cv::Mat& D,
+                      const Eigen::VectorXd& beta, FrameCaptureEval* e) {
+  if (prev.frame != index - 1 || prev.D.empty() || prev.beta.size() != beta.size() ||
+      !((beta - prev.beta).cwiseAbs().maxCoeff() < 1e-6)) {
+    return;
+  }
+  const MapComparison cmp = CompareMaps(D, prev.D, c.wrinkle_mask);
+  e->still = cmp.extracted_rms_mm > 0 && cmp.reference_rms_mm > 0;  // no patch, no detail: nothing to compare
+  e->d_still_correlation = cmp.correlation;
+}
+
+// D^t of one frame and its band minus the truth's (both empty when D^t is not compared).
+struct FrameDisplacement {
+  cv::Mat D, band_err;
+};
+
+// D^t against the truth: over the face and the wrinkle regions, raw and in the
+// wrinkle band; the wrinkle offset, the pools, the jitter and the still face; the
+// appearance probe on the same truth.
+FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int index, const CaptureFrameArrays& arrays,
+                                            const Eigen::VectorXd& beta, FrameLoopState* st, FrameCaptureEval* e) {
+  FrameDisplacement d;
+  const fs::path d_path = c.capture / "displacement" / fmt::format("{:06d}.exr", index);
+  if (!c.corr.same_uv || !fs::is_regular_file(d_path)) return d;
+  d.D = ReadMap(d_path, c.R);
+  const cv::Mat layer = ReadMap(TruthMapPath(c.dataset, c.info, index), c.R, /*resample=*/true);
+  const cv::Mat G = c.detail_truth ? ResampleSquareMap(c.detail_truth->Detail(beta), c.R) : layer;
+  if (!c.options.truth_maps_dir.empty()) {
+    WriteImage(fs::path(c.options.truth_maps_dir) / fmt::format("{:06d}.exr", index), G);
+  }
+  if (st->appearance) st->appearance->Add(index, arrays, G, layer);
+  e->has_displacement = true;
+  e->d_face = CompareMaps(d.D, G, c.coverage);
+  e->d_wrinkle = CompareMaps(d.D, G, c.wrinkle_mask);
+  const cv::Mat Db = WrinkleBand(d.D, c.band_mask), Gb = WrinkleBand(G, c.band_mask);
+  e->d_face_band = CompareMaps(Db, Gb, c.coverage);
+  e->d_wrinkle_band = CompareMaps(Db, Gb, c.wrinkle_mask);
+  d.band_err = Db - Gb;
+  MeasureWrinkleOffset(c, Db, Gb, e);
+  PoolDisplacement(c, d.D, G, Db, Gb, layer, *e, st);
+  MeasureDisplacementJitter(c, st->previous, index, d.band_err, e);
+  MeasureStillFace(c, st->previous, index, d.D, beta, e);
+  return d;
+}
+
+// H^t against the true high-resolution surface (every surface_every-th tracked
+// frame), for L~^t alone, with D^HF, and with D^t + D^HF.
+void EvaluateFrameSurface(const CaptureEvalContext& c, int tracked_count, const RigTruth& t,
+                          const MatX3d& refined_aligned, const cv::Mat& D, FrameCaptureEval* e) {
+  if (!c.actor || (tracked_count - 1) % c.options.surface_every != 0) return;
+  TriMesh truth_hires = c.actor->Frame(t.beta, true).hires;
+  truth_hires.V = Transform(t.truth.cam_from_head, truth_hires.V);
+  const RayCaster caster(truth_hires);
+  const cv::Mat zero = cv::Mat::zeros(c.R, c.R, CV_32F);
+  const double max_mm = c.options.surface_max_distance_mm;
+  e->surface_coarse = MeasureSurface(c.hifi->Build(refined_aligned, zero), caster, max_mm, c.wrinkle_mask);
+  e->surface_meso = MeasureSurface(c.hifi->Build(refined_aligned, c.meso), caster, max_mm, c.wrinkle_mask);
+  if (!D.empty()) {
+    e->surface_full = MeasureSurface(c.hifi->Build(refined_aligned, D + c.meso), caster, max_mm, c.wrinkle_mask);
+  }
+  e->has_surface = true;
+}
+
+// One frame: tracking, displacement, surface (an untracked one: only whether the face was there to be tracked).
+FrameCaptureEval EvaluateFrame(const CaptureEvalContext& c, int index, FrameLoopState* st) {
+  FrameCaptureEval e;
+  e.frame = index;
+  const CaptureFrameArrays arrays = ReadCaptureFrameArrays(c.capture / "frames" / fmt::format("{:06d}.cfr", index));
+  e.tracked = arrays.tracked;
+  if (!e.tracked) {
+    // Was the face there to be tracked? (the loss metrics)
+    e.true_visible_fraction =
+        c.VisibleFraction(c.corr.MapTruth(ReadFrameTruth(c.dataset, index, c.truth_rig.num_vertices())).vertex_visible);
+    st->previous.frame = -2;
+    return e;
+  }
+  Require(arrays.coarse.rows() == c.rig.num_vertices(),
+          fmt::format("{}: {} vertices, the rig has {}", (c.capture / "frames").string(), arrays.coarse.rows(),
+                      c.rig.num_vertices()));
+  ++st->tracked_count;
+  const RigTruth t = ReadRigTruth(c, index);
+  FrameTrackingVectors v = EvaluateFrameTracking(c, index, arrays, t, st, &e);
+  FrameDisplacement d = EvaluateFrameDisplacement(c, index, arrays, t.beta, st, &e);
+  EvaluateFrameSurface(c, st->tracked_count, t, v.refined_aligned, d.D, &e);
+  st->previous = {index, std::move(v.err_coarse), std::move(v.err_refined), std::move(d.band_err), std::move(d.D),
+                  t.beta};
+  return e;
+}
+
+// Loss and recovery: the frames with the face visible but not tracked, and the longest run of them.
+void SummariseLoss(const CaptureEvalOptions& options, CaptureEvalSummary* s) {
   int run = 0;
-  std::vector<double> offsets;
-  for (const FrameCaptureEval& e : s.per_frame) {
-    s.min_visible_fraction = std::min(s.min_visible_fraction, e.true_visible_fraction);
+  for (const FrameCaptureEval& e : s->per_frame) {
+    s->min_visible_fraction = std::min(s->min_visible_fraction, e.true_visible_fraction);
     if (!e.tracked && e.true_visible_fraction >= options.visible_face_fraction) {
-      ++s.lost_visible_frames;
-      s.longest_loss_frames = std::max(s.longest_loss_frames, ++run);
+      ++s->lost_visible_frames;
+      s->longest_loss_frames = std::max(s->longest_loss_frames, ++run);
     } else {
       run = 0;
     }
-    if (e.has_offset) offsets.push_back(e.d_offset_mm);
   }
-  s.offset_frames = static_cast<int>(offsets.size());
-  if (!offsets.empty()) {
-    double sum = 0;
-    for (double o : offsets) sum += o;
-    s.d_offset_mm = sum / offsets.size();
-    const size_t q = std::max<size_t>(1, offsets.size() / 4);
-    double first = 0, last = 0;
-    for (size_t i = 0; i < q; ++i) {
-      first += offsets[i];
-      last += offsets[offsets.size() - 1 - i];
-    }
-    s.d_offset_slide_mm = (last - first) / q;
-  }
+}
 
-  // Means.
-  s.frames = static_cast<int>(s.per_frame.size());
-  s.flow = PoolFlowStages(s.per_frame, &s.flow_frames);
-  s.lk_truth = lk_meter.Result();
-  int jitter_frames = 0, d_jitter_frames = 0;
-  for (const FrameCaptureEval& e : s.per_frame) {
+// The wrinkle offset's mean and its slide (the last quarter of the measured frames
+// minus the first, Fig. 14).
+void SummariseWrinkleOffset(CaptureEvalSummary* s) {
+  std::vector<double> offsets;
+  for (const FrameCaptureEval& e : s->per_frame)
+    if (e.has_offset) offsets.push_back(e.d_offset_mm);
+  s->offset_frames = static_cast<int>(offsets.size());
+  if (offsets.empty()) return;
+  double sum = 0;
+  for (double o : offsets) sum += o;
+  s->d_offset_mm = sum / offsets.size();
+  const size_t q = std::max<size_t>(1, offsets.size() / 4);
+  double first = 0, last = 0;
+  for (size_t i = 0; i < q; ++i) {
+    first += offsets[i];
+    last += offsets[offsets.size() - 1 - i];
+  }
+  s->d_offset_slide_mm = (last - first) / q;
+}
+
+// The tracking errors averaged over the tracked frames: (per frame, in the summary).
+constexpr std::pair<double FrameCaptureEval::*, double CaptureEvalSummary::*> kTrackingMeans[] = {
+    {&FrameCaptureEval::coarse_px, &CaptureEvalSummary::coarse_px},
+    {&FrameCaptureEval::refined_px, &CaptureEvalSummary::refined_px},
+    {&FrameCaptureEval::coarse_mm, &CaptureEvalSummary::coarse_mm},
+    {&FrameCaptureEval::refined_mm, &CaptureEvalSummary::refined_mm},
+    {&FrameCaptureEval::coarse_aligned_mm, &CaptureEvalSummary::coarse_aligned_mm},
+    {&FrameCaptureEval::refined_aligned_mm, &CaptureEvalSummary::refined_aligned_mm},
+    {&FrameCaptureEval::prior_px, &CaptureEvalSummary::prior_px},
+    {&FrameCaptureEval::prior_mm, &CaptureEvalSummary::prior_mm}};
+
+// Means of the tracking errors over the tracked frames (the jitter over the frames that have one).
+void AverageTracking(CaptureEvalSummary* s) {
+  int jitter_frames = 0;
+  for (const FrameCaptureEval& e : s->per_frame) {
     if (!e.tracked) continue;
-    ++s.tracked;
-    s.coarse_px += e.coarse_px;
-    s.refined_px += e.refined_px;
-    s.coarse_mm += e.coarse_mm;
-    s.refined_mm += e.refined_mm;
-    s.coarse_aligned_mm += e.coarse_aligned_mm;
-    s.refined_aligned_mm += e.refined_aligned_mm;
-    s.prior_px += e.prior_px;
-    s.prior_mm += e.prior_mm;
+    ++s->tracked;
+    for (const auto& [frame_field, summary_field] : kTrackingMeans) s->*summary_field += e.*frame_field;
     if (e.coarse_jitter_px > 0) {
-      s.coarse_jitter_px += e.coarse_jitter_px;
-      s.refined_jitter_px += e.refined_jitter_px;
+      s->coarse_jitter_px += e.coarse_jitter_px;
+      s->refined_jitter_px += e.refined_jitter_px;
       ++jitter_frames;
     }
+  }
+  if (s->tracked > 0) {
+    const double n = s->tracked;
+    for (const auto& [frame_field, summary_field] : kTrackingMeans) s->*summary_field /= n;
+  }
+  if (jitter_frames > 0) {
+    s->coarse_jitter_px /= jitter_frames;
+    s->refined_jitter_px /= jitter_frames;
+  }
+}
+
+// Means over the tracked frames with D^t (jitter, still face) and with surface metrics.
+void AverageDisplacementAndSurface(CaptureEvalSummary* s) {
+  int d_jitter_frames = 0;
+  for (const FrameCaptureEval& e : s->per_frame) {
+    if (!e.tracked) continue;
     if (e.has_displacement) {
-      ++s.displacement_frames;
+      ++s->displacement_frames;
       if (e.d_jitter_mm > 0) {
-        s.d_jitter_mm += e.d_jitter_mm;
+        s->d_jitter_mm += e.d_jitter_mm;
         ++d_jitter_frames;
       }
       if (e.still) {
-        s.d_still_correlation += e.d_still_correlation;
-        ++s.still_pairs;
+        s->d_still_correlation += e.d_still_correlation;
+        ++s->still_pairs;
       }
     }
     if (e.has_surface) {
-      ++s.surface_frames;
-      Accumulate(e.surface_coarse, &s.surface_coarse);
-      Accumulate(e.surface_meso, &s.surface_meso);
-      Accumulate(e.surface_full, &s.surface_full);
+      ++s->surface_frames;
+      Accumulate(e.surface_coarse, &s->surface_coarse);
+      Accumulate(e.surface_meso, &s->surface_meso);
+      Accumulate(e.surface_full, &s->surface_full);
     }
   }
-  if (s.tracked > 0) {
-    const double n = s.tracked;
-    s.coarse_px /= n;
-    s.refined_px /= n;
-    s.coarse_mm /= n;
-    s.refined_mm /= n;
-    s.coarse_aligned_mm /= n;
-    s.refined_aligned_mm /= n;
-    s.prior_px /= n;
-    s.prior_mm /= n;
-  }
-  if (jitter_frames > 0) {
-    s.coarse_jitter_px /= jitter_frames;
-    s.refined_jitter_px /= jitter_frames;
-  }
-  s.d_face = pooled_face.Result();
-  s.d_wrinkle = pooled_wrinkle.Result();
-  s.d_wrinkle_band = pooled_band.Result();
-  s.d_layer_band = pooled_layer_band.Result();
-  if (d_jitter_frames > 0) s.d_jitter_mm /= d_jitter_frames;
-  if (s.still_pairs > 0) s.d_still_correlation /= s.still_pairs;
-  if (appearance) s.appearance = appearance->Result();
-  Divide(s.surface_frames, &s.surface_coarse);
-  Divide(s.surface_frames, &s.surface_meso);
-  Divide(s.surface_frames, &s.surface_full);
-  if (cap.contains("timing")) s.timing_json = cap["timing"].dump();
-  s.fps = cap.value("fps", 0.0);
-  s.tracking_share = cap.value("tracking_share", 0.0);
-  s.detail_share = cap.value("detail_share", 0.0);
+  if (d_jitter_frames > 0) s->d_jitter_mm /= d_jitter_frames;
+  if (s->still_pairs > 0) s->d_still_correlation /= s->still_pairs;
+  Divide(s->surface_frames, &s->surface_coarse);
+  Divide(s->surface_frames, &s->surface_meso);
+  Divide(s->surface_frames, &s->surface_full);
+}
+
+// The summary: the per-frame results reduced, the pools and meters read out, and
+// the capture's speed copied.
+CaptureEvalSummary ReduceSummary(const CaptureEvalContext& c, const FrameLoopState& st,
+                                 std::vector<FrameCaptureEval> per_frame) {
+  CaptureEvalSummary s;
+  s.capture = c.capture.string();
+  s.dataset = c.dataset.string();
+  s.detail_truth = c.options.detail_truth;
+  s.per_frame = std::move(per_frame);
+  s.frames = static_cast<int>(s.per_frame.size());
+  s.error_vectors = st.error_vectors;
+  s.error_vectors_frame = st.error_vectors_frame;
+  SummariseLoss(c.options, &s);
+  SummariseWrinkleOffset(&s);
+  s.flow = PoolFlowStages(s.per_frame, &s.flow_frames);
+  s.lk_truth = st.lk_meter.Result();
+  AverageTracking(&s);
+  AverageDisplacementAndSurface(&s);
+  s.active_frames = st.active_frames;
+  s.layer_active_frames = st.layer_active_frames;
+  s.d_face = st.pooled_face.Result();
+  s.d_wrinkle = st.pooled_wrinkle.Result();
+  s.d_wrinkle_band = st.pooled_band.Result();
+  s.d_layer_band = st.pooled_layer_band.Result();
+  if (st.appearance) s.appearance = st.appearance->Result();
+  if (c.cap.contains("timing")) s.timing_json = c.cap["timing"].dump();
+  s.fps = c.cap.value("fps", 0.0);
+  s.tracking_share = c.cap.value("tracking_share", 0.0);
+  s.detail_share = c.cap.value("detail_share", 0.0);
   return s;
+}
+
+}  // namespace
+
+CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& dataset,
+                                   const CaptureEvalOptions& options) {
+  options.Check();
+  const CaptureEvalContext context(capture, dataset, options);
+  FrameLoopState state(context);
+  std::vector<FrameCaptureEval> per_frame;
+  for (int index : context.frames) per_frame.push_back(EvaluateFrame(context, index, &state));
+  return ReduceSummary(context, state, std::move(per_frame));
 }
 
 std::string CaptureEvalSummary::ToJson() const {
