@@ -460,6 +460,31 @@ class LkFromTruthMeter {
 // Rung A of the detail ladder (eval/appearance_ceiling.h): the capture's T^t,
 // re-extracted from the dataset's frame at the capture's L~^t with the capture's
 // texture options, against D* and the wrinkle layer.
+// The dataset frame `path` as 3-channel RGB (gray and RGBA converted); `linear`:
+// decoded from sRGB, else the sRGB-encoded values in [0, 1].
+cv::Mat ReadRgbFrame(const fs::path& path, bool linear) {
+  cv::Mat img = ReadImage(path, linear);
+  if (img.channels() == 1) cv::cvtColor(img, img, cv::COLOR_GRAY2RGB);
+  if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_RGBA2RGB);
+  return img;
+}
+
+// The capture's FrameTextureOptions: the fields of capture.json's "options" that the
+// struct knows (the rest belong to other stages), its defaults for the others; the
+// map resolution is the one the capture ran at (top-level "map_resolution": the
+// model's, which overrides the option).
+FrameTextureOptions CaptureTextureOptions(const json& capture_json, const std::string& what) {
+  const json o = capture_json.value("options", json::object());
+  json known = json::object();
+  for (const std::string& key : OptionFieldNames<FrameTextureOptions>()) {
+    if (o.contains(key)) known[key] = o[key];
+  }
+  FrameTextureOptions t;
+  SetOptionsFromJson(known.dump(), what, &t);
+  t.map_resolution = capture_json.value("map_resolution", t.map_resolution);
+  return t;
+}
+
 class AppearanceProbe {
  public:
   // `frames`: the capture's frames; `frame_path`: a frame's image. Reads the truth
@@ -469,13 +494,8 @@ class AppearanceProbe {
                   const std::function<fs::path(int)>& frame_path, const json& info, const cv::Mat& mask,
                   const AppearanceCeilingOptions& options)
       : capture_(capture), frame_path_(frame_path) {
-    FrameTextureOptions t;
-    const json o = capture_json.value("options", json::object());
-    t.map_resolution = capture_json.value("map_resolution", t.map_resolution);
-    t.max_view_angle_deg = o.value("max_view_angle_deg", t.max_view_angle_deg);
-    t.depth_tolerance_mm = o.value("depth_tolerance_mm", t.depth_tolerance_mm);
-    t.erode_seen_texels = o.value("erode_seen_texels", t.erode_seen_texels);
-    extractor_ = std::make_unique<FrameTextureExtractor>(rig, K, t);
+    extractor_ = std::make_unique<FrameTextureExtractor>(
+        rig, K, CaptureTextureOptions(capture_json, (capture / "capture.json").string()));
     // The reference: the tracked frames with the smallest true |β|.
     std::vector<std::pair<double, int>> by_expression;
     for (int index : frames) {
@@ -486,7 +506,8 @@ class AppearanceProbe {
     std::vector<cv::Mat> textures, seen;
     for (const auto& [norm, index] : by_expression) {
       if (static_cast<int>(textures.size()) == options.reference_frames) break;
-      const FrameTexture tex = Texture(index);
+      const FrameTexture tex =
+          Texture(index, ReadCaptureFrameArrays(capture_ / "frames" / fmt::format("{:06d}.cfr", index)));
       if (tex.num_seen == 0) continue;  // not tracked
       if (textures.empty()) reference_frame_ = index;
       textures.push_back(tex.gray);
@@ -499,23 +520,18 @@ class AppearanceProbe {
   }
   // Frame `index` (its capture arrays) with its truth D* (`detail`) and wrinkle layer.
   void Add(int index, const CaptureFrameArrays& arrays, const cv::Mat& detail, const cv::Mat& layer) {
-    if (!meter_ || !arrays.tracked || !fs::is_regular_file(frame_path_(index))) return;
-    const FrameTexture tex = extractor_->Extract(arrays.refined, ReadLinearFrame(index));
+    if (!meter_) return;
+    const FrameTexture tex = Texture(index, arrays);
     if (tex.num_seen > 0) meter_->Add(index, tex.gray, {detail, layer - reference_layer_});
   }
   AppearanceCeiling Result() const { return meter_ ? meter_->Result() : AppearanceCeiling(); }
 
  private:
-  cv::Mat ReadLinearFrame(int index) const {
-    cv::Mat img = ReadImage(frame_path_(index));  // linear RGB
-    if (img.channels() == 1) cv::cvtColor(img, img, cv::COLOR_GRAY2RGB);
-    if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_RGBA2RGB);
-    return img;
-  }
-  FrameTexture Texture(int index) const {
-    const CaptureFrameArrays a = ReadCaptureFrameArrays(capture_ / "frames" / fmt::format("{:06d}.cfr", index));
+  // T^t of frame `index` at the capture's L~^t; empty (num_seen 0) when untracked or
+  // the frame's image is missing.
+  FrameTexture Texture(int index, const CaptureFrameArrays& a) const {
     if (!a.tracked || !fs::is_regular_file(frame_path_(index))) return FrameTexture();
-    return extractor_->Extract(a.refined, ReadLinearFrame(index));
+    return extractor_->Extract(a.refined, ReadRgbFrame(frame_path_(index), /*linear=*/true));
   }
 
   fs::path capture_;
@@ -843,13 +859,8 @@ MatX3d MeasureVertexErrors3d(const CaptureEvalContext& c, const CaptureFrameArra
 
 // The frame (sRGB-encoded RGB in [0, 1]) when `needed` and on disk; else empty.
 cv::Mat ReadFrameRgb(const CaptureEvalContext& c, int index, bool needed) {
-  cv::Mat img;
-  if (needed && fs::is_regular_file(c.FramePath(index))) {
-    img = ReadImage(c.FramePath(index), /*srgb=*/false);
-    if (img.channels() == 1) cv::cvtColor(img, img, cv::COLOR_GRAY2RGB);
-    if (img.channels() == 4) cv::cvtColor(img, img, cv::COLOR_RGBA2RGB);
-  }
-  return img;
+  if (!needed || !fs::is_regular_file(c.FramePath(index))) return cv::Mat();
+  return ReadRgbFrame(c.FramePath(index), /*linear=*/false);
 }
 
 // LK from the true positions (issue 16): this frame's step, or a break in the chain.
