@@ -25,6 +25,7 @@
 #include "core/ray_caster.h"
 #include "core/uv_raster.h"
 #include "eval/appearance_ceiling.h"
+#include "eval/registered_truth.h"
 #include "eval/detail_truth.h"
 #include "eval/tracking_metrics.h"
 #include "pipeline/capture/capture_io.h"
@@ -46,6 +47,7 @@ void CaptureEvalOptions::VisitFields(OptionVisitor& v) {
   v.Field("band_mm", band_mm);
   v.Field("detail_truth", detail_truth);
   v.Field("truth_maps_dir", truth_maps_dir);
+  v.Field("registered_truth", registered_truth);
   v.Field("wrinkle_regions", wrinkle_regions);
   v.Field("surface_max_distance_mm", surface_max_distance_mm);
   v.Field("surface_mesh_resolution", surface_mesh_resolution);
@@ -773,10 +775,31 @@ struct FrameLoopState {
                          [&c](int index) { return c.FramePath(index); }, c.info, c.wrinkle_mask,
                          c.options.appearance);
     }
+    if (c.options.registered_truth && c.detail_truth) {
+      registration.emplace(c.rig, c.K, CaptureTextureOptions(c.cap, (c.capture / "capture.json").string()));
+      chart_u.create(c.R, c.R, CV_32F);
+      chart_v.create(c.R, c.R, CV_32F);
+      for (int j = 0; j < c.R; ++j) {
+        for (int i = 0; i < c.R; ++i) {
+          chart_u.at<float>(j, i) = static_cast<float>(i + 0.5);
+          chart_v.at<float>(j, i) = static_cast<float>(j + 0.5);
+        }
+      }
+    }
   }
 
   LkFromTruthMeter lk_meter;
   std::optional<AppearanceProbe> appearance;  // rung A of the detail ladder
+  std::optional<TruthRegistration> registration;
+  // Pools of the registered truth (CaptureEvalSummary::Registered), active frames.
+  MapMoments reg_detail, reg_band, reg_layer_band, reg_truth_band, reg_truth_layer_band;
+  int reg_frames = 0;
+  cv::Mat chart_u, chart_v;  // R×R: each texel's own chart coordinates, texels
+  // The slide: the true texel each tracked texel sees minus its own, texels, over the
+  // wrinkle regions; per registered frame the medians of its length and of its u and
+  // v components (robust to texels whose pixel straddles a UV seam), summed.
+  double slide_length = 0, slide_u = 0, slide_v = 0;
+  int slide_frames = 0;
   // Displacement pooled over the active frames (and those where the wrinkle layer is active).
   MapMoments pooled_face, pooled_wrinkle, pooled_band, pooled_layer_band;
   int active_frames = 0, layer_active_frames = 0;
@@ -986,6 +1009,52 @@ void MeasureStillFace(const CaptureEvalContext& c, const PreviousFrame& prev, in
   e->d_still_correlation = cmp.correlation;
 }
 
+// The median of `values` (empty: 0).
+double Median(std::vector<float> values) {
+  if (values.empty()) return 0.0;
+  auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+  std::nth_element(values.begin(), mid, values.end());
+  return *mid;
+}
+
+// A frame's slide (du, dv: R×R, texels, NaN where not registered) over the wrinkle
+// regions: the medians of its length and components, added to the loop's sums.
+void AddSlide(const CaptureEvalContext& c, const cv::Mat& du, const cv::Mat& dv, FrameLoopState* st) {
+  std::vector<float> length, u, v;
+  for (int j = 0; j < c.R; ++j) {
+    for (int i = 0; i < c.R; ++i) {
+      const float a = du.at<float>(j, i), b = dv.at<float>(j, i);
+      if (!c.wrinkle_mask.at<uint8_t>(j, i) || !std::isfinite(a) || !std::isfinite(b)) continue;
+      length.push_back(std::hypot(a, b));
+      u.push_back(a);
+      v.push_back(b);
+    }
+  }
+  if (length.empty()) return;
+  st->slide_length += Median(std::move(length));
+  st->slide_u += Median(std::move(u));
+  st->slide_v += Median(std::move(v));
+  ++st->slide_frames;
+}
+
+// An active frame's D^t against the truth registered through the image at L~^t
+// (eval/registered_truth.h): D* raw and banded, and the wrinkle layer's band; and
+// the registered truth against the truth itself.
+void PoolRegisteredTruth(const CaptureEvalContext& c, const RigTruth& t, const CaptureFrameArrays& arrays,
+                         const cv::Mat& D, const cv::Mat& G, const cv::Mat& Db, const cv::Mat& Gb, const cv::Mat& layer,
+                         FrameLoopState* st) {
+  const cv::Mat Lb = WrinkleBand(layer, c.band_mask);
+  const std::vector<cv::Mat> reg =
+      st->registration->Register(t.true_cam, arrays.refined, {G, Gb, Lb, st->chart_u, st->chart_v});
+  ++st->reg_frames;
+  AddSlide(c, reg[3] - st->chart_u, reg[4] - st->chart_v, st);
+  st->reg_detail.Add(D, reg[0], c.wrinkle_mask);
+  st->reg_band.Add(Db, reg[1], c.wrinkle_mask);
+  st->reg_layer_band.Add(Db, reg[2], c.wrinkle_mask);
+  st->reg_truth_band.Add(reg[1], Gb, c.wrinkle_mask);
+  st->reg_truth_layer_band.Add(reg[2], Lb, c.wrinkle_mask);
+}
+
 // D^t of one frame and its band minus the truth's (both empty when D^t is not compared).
 struct FrameDisplacement {
   cv::Mat D, band_err;
@@ -995,7 +1064,8 @@ struct FrameDisplacement {
 // wrinkle band; the wrinkle offset, the pools, the jitter and the still face; the
 // appearance probe on the same truth.
 FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int index, const CaptureFrameArrays& arrays,
-                                            const Eigen::VectorXd& beta, FrameLoopState* st, FrameCaptureEval* e) {
+                                            const RigTruth& t, FrameLoopState* st, FrameCaptureEval* e) {
+  const Eigen::VectorXd& beta = t.beta;
   FrameDisplacement d;
   const fs::path d_path = c.capture / "displacement" / fmt::format("{:06d}.exr", index);
   if (!c.corr.same_uv || !fs::is_regular_file(d_path)) return d;
@@ -1015,6 +1085,9 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
   d.band_err = Db - Gb;
   MeasureWrinkleOffset(c, Db, Gb, e);
   PoolDisplacement(c, d.D, G, Db, Gb, layer, *e, st);
+  if (st->registration && e->d_wrinkle_band.reference_rms_mm >= c.options.active_reference_rms_mm) {
+    PoolRegisteredTruth(c, t, arrays, d.D, G, Db, Gb, layer, st);
+  }
   MeasureDisplacementJitter(c, st->previous, index, d.band_err, e);
   MeasureStillFace(c, st->previous, index, d.D, beta, e);
   return d;
@@ -1057,7 +1130,7 @@ FrameCaptureEval EvaluateFrame(const CaptureEvalContext& c, int index, FrameLoop
   ++st->tracked_count;
   const RigTruth t = ReadRigTruth(c, index);
   FrameTrackingVectors v = EvaluateFrameTracking(c, index, arrays, t, st, &e);
-  FrameDisplacement d = EvaluateFrameDisplacement(c, index, arrays, t.beta, st, &e);
+  FrameDisplacement d = EvaluateFrameDisplacement(c, index, arrays, t, st, &e);
   EvaluateFrameSurface(c, st->tracked_count, t, v.refined_aligned, d.D, &e);
   st->previous = {index, std::move(v.err_coarse), std::move(v.err_refined), std::move(d.band_err), std::move(d.D),
                   t.beta};
@@ -1187,6 +1260,14 @@ CaptureEvalSummary ReduceSummary(const CaptureEvalContext& c, const FrameLoopSta
   s.d_wrinkle_band = st.pooled_band.Result();
   s.d_layer_band = st.pooled_layer_band.Result();
   if (st.appearance) s.appearance = st.appearance->Result();
+  s.registered = {st.reg_frames,           st.reg_detail.Result(),     st.reg_band.Result(),
+                  st.reg_layer_band.Result(), st.reg_truth_band.Result(), st.reg_truth_layer_band.Result()};
+  if (st.slide_frames > 0) {
+    const double scale = c.mm_per_texel / st.slide_frames;
+    s.registered.slide_mm = st.slide_length * scale;
+    s.registered.slide_u_mm = st.slide_u * scale;
+    s.registered.slide_v_mm = st.slide_v * scale;
+  }
   if (c.cap.contains("timing")) s.timing_json = c.cap["timing"].dump();
   s.fps = c.cap.value("fps", 0.0);
   s.tracking_share = c.cap.value("tracking_share", 0.0);
@@ -1252,6 +1333,17 @@ std::string CaptureEvalSummary::ToJson() const {
   } else {
     j["displacement"]["offset_mm"] = nullptr;
     j["displacement"]["offset_slide_mm"] = nullptr;
+  }
+  if (registered.frames > 0) {  // eval/registered_truth.h; else absent
+    j["registered"] = {{"frames", registered.frames},
+                       {"wrinkle_regions", ComparisonJson(registered.detail)},
+                       {"wrinkle_regions_band", ComparisonJson(registered.band)},
+                       {"wrinkle_layer_band", ComparisonJson(registered.layer_band)},
+                       {"truth_band_correlation", registered.truth_band.correlation},
+                       {"truth_layer_band_correlation", registered.truth_layer_band.correlation},
+                       {"slide_mm", registered.slide_mm},
+                       {"slide_u_mm", registered.slide_u_mm},
+                       {"slide_v_mm", registered.slide_v_mm}};
   }
   if (appearance.measured()) {  // rung A of the detail ladder (eval/appearance_ceiling.h); else absent
     j["appearance"] = {{"detail_correlation", appearance.correlation[0]},
@@ -1398,10 +1490,21 @@ std::string CaptureEvalSummary::ToMarkdown() const {
                        "frame's {:.3f} (wrinkle regions)\n",
                        still_pairs, d_still_correlation);
     }
+    if (registered.frames > 0) {
+      o << fmt::format("Against the truth registered through the image at L~^t (what the tracked texture shows at each "
+                       "texel), {} frames: D^t correlates {:.3f} with D* ({:.3f} in the wrinkle band), {:.3f} with the "
+                       "wrinkle layer's band; the registration keeps {:.3f} of D*'s band and {:.3f} of the layer's "
+                       "(correlation with the unregistered truth); the texture slides {:.2f} mm on the face in the "
+                       "wrinkle regions ({:+.2f} mm along u, {:+.2f} mm along v; medians per frame, mean over frames)\n",
+                       registered.frames, registered.detail.correlation, registered.band.correlation,
+                       registered.layer_band.correlation, registered.truth_band.correlation,
+                       registered.truth_layer_band.correlation, registered.slide_mm, registered.slide_u_mm,
+                       registered.slide_v_mm);
+    }
     if (appearance.measured()) {
-      o << fmt::format("Appearance ceiling (a linear filter of the capture's own texture T^t/T_ref - 1, fitted on half "
-                       "of {} frames and scored on the other half; no regressor reading these textures can be expected "
-                       "to do better): correlation {:.3f} with the truth, {:.3f} with the wrinkle layer\n",
+      o << fmt::format("Appearance index (a linear filter of the capture's own texture T^t/T_ref - 1, fitted on half "
+                       "of {} frames and scored on the other half: how visible the detail is in the texture, not a "
+                       "bound): correlation {:.3f} with the truth, {:.3f} with the wrinkle layer\n",
                        appearance.frames[0] + appearance.frames[1], appearance.correlation[0],
                        appearance.correlation[1]);
     }

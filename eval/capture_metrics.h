@@ -79,6 +79,9 @@ struct CaptureEvalOptions {
   // Rung A of the detail ladder: the appearance ceiling (eval/appearance_ceiling.h),
   // measured when the truth D* is known.
   AppearanceCeilingOptions appearance;
+  // The truth registered through the image (eval/registered_truth.h): D^t also
+  // against the truth the capture's L~^t sees at each texel, when D* is known.
+  bool registered_truth = true;
   std::string offset_region = "forehead";
   double offset_search_mm = 4.0;
   double offset_min_correlation = 0.2;  // below: the lines do not match at any shift; not measured
@@ -199,6 +202,20 @@ struct CaptureEvalSummary {
   // Rung A: a linear filter of the capture's own textures against D* (correlation[0])
   // and the wrinkle layer beyond the most neutral frame's (correlation[1]).
   AppearanceCeiling appearance;
+  // The truth registered through the image (eval/registered_truth.h), pooled over
+  // the active frames in the wrinkle regions: D^t against the registered D* (raw and
+  // wrinkle band) and the registered wrinkle layer's band; and how much of the truth
+  // survives the registration (registered against unregistered band, D* and layer):
+  // 1 when L~^t is the true mesh up to the image's resolution. The slide: how far
+  // the true point a tracked texel sees lies from the texel itself on the chart
+  // (per frame the median length and the median u and v components, +v towards the
+  // chart's bottom; means over the registered frames), mm at the chart's mean scale,
+  // over the same texels.
+  struct Registered {
+    int frames = 0;
+    MapComparison detail, band, layer_band, truth_band, truth_layer_band;
+    double slide_mm = 0, slide_u_mm = 0, slide_v_mm = 0;
+  } registered;
   std::string timing_json = "{}";  // copied from the capture's summary
   double fps = 0, tracking_share = 0, detail_share = 0;
   std::vector<FrameCaptureEval> per_frame;

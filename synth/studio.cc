@@ -5,7 +5,11 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <optional>
 #include <set>
+#include <sstream>
+#include <string_view>
+
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
@@ -18,7 +22,38 @@
 
 namespace crease {
 
+namespace {
+
+// "directional:AZ:EL[:AMBIENT]" → DirectionalRig(AZ, EL) with its ambient set; nullopt
+// when `spec` does not start with "directional:".
+std::optional<LightRig> DirectionalRigFromSpec(const std::string& spec) {
+  constexpr std::string_view kPrefix = "directional:";
+  if (spec.rfind(kPrefix, 0) != 0) return std::nullopt;
+  std::vector<double> values;
+  std::stringstream ss(spec.substr(kPrefix.size()));
+  for (std::string item; std::getline(ss, item, ':');) {
+    char* end = nullptr;
+    const double v = std::strtod(item.c_str(), &end);
+    Require(!item.empty() && end == item.c_str() + item.size() && std::isfinite(v),
+            fmt::format("light '{}': '{}' is not a number (expected directional:AZIMUTH:ELEVATION[:AMBIENT])",
+                        spec, item));
+    values.push_back(v);
+  }
+  Require(values.size() == 2 || values.size() == 3,
+          fmt::format("light '{}': expected directional:AZIMUTH:ELEVATION[:AMBIENT] in degrees", spec));
+  LightRig rig = DirectionalRig(values[0], values[1]);
+  if (values.size() == 3) {
+    Require(values[2] >= 0.0, fmt::format("light '{}': ambient {} must be >= 0", spec, values[2]));
+    std::get<AmbientOcclusionLight>(rig.lights[1]).color = Eigen::Vector3d::Constant(values[2]);
+  }
+  rig.name = spec;
+  return rig;
+}
+
+}  // namespace
+
 LightRig LightRigFromSpec(const std::string& spec) {
+  if (auto rig = DirectionalRigFromSpec(spec)) return *rig;
   const std::string ext = LowerExtension(spec);
   if (ext != ".exr" && ext != ".hdr") return MakeLightRig(spec);
   LightRig rig;

@@ -109,6 +109,15 @@ prior, fit = (json.load(open(p))["tracking"]["coarse_px"] for p in sys.argv[1:3]
 print(f"coarse 2D error: ground-truth prior {prior:.2f} px, ground-truth fit {fit:.2f} px")
 sys.exit(0 if fit < 0.5 * prior and fit < 1.5 else 1)
 PY
+# The truth registered through the image (eval/registered_truth.h): the texture of the
+# ground-truth fit slides less on the face than the prior control's, and keeps the truth.
+python3 - "$tmp/cap/eval.json" "$tmp/cap_fit/eval.json" <<'PY' || { echo "FAIL: registered truth"; fails=$((fails+1)); }
+import json, sys
+prior, fit = (json.load(open(p)).get("registered") for p in sys.argv[1:3])
+print(f"texture slide: ground-truth prior {prior['slide_mm']:.2f} mm, ground-truth fit {fit['slide_mm']:.2f} mm; "
+      f"truth band kept {prior['truth_band_correlation']:.2f} / {fit['truth_band_correlation']:.2f}")
+sys.exit(0 if fit["slide_mm"] < prior["slide_mm"] and fit["slide_mm"] < 1.0 and fit["truth_band_correlation"] > 0.5 else 1)
+PY
 bad "prior and fit controls together" "exclude each other" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-prior --ground-truth-fit -o "$tmp/cap3"
 bad "capture missing model" "m3.cdm" "$crease" capture -i "$tmp/seq" --model "$tmp/m3.cdm" -o "$tmp/cap2"
 bad "capture model of another kind" "detail model" "$crease" capture -i "$tmp/seq" --model "$tmp/actor.json" -o "$tmp/cap2"

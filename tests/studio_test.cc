@@ -39,6 +39,21 @@ SequenceDatasetOptions SmallStudio() {
   return o;
 }
 
+TEST(Studio, DirectionalLightSpecSweepsTheLightDirection) {
+  const LightRig rig = LightRigFromSpec("directional:80:5:0.2");
+  EXPECT_EQ(rig.name, "directional:80:5:0.2");
+  ASSERT_EQ(rig.lights.size(), 2u);
+  const auto& d = std::get<DirectionalLight>(rig.lights[0]);
+  EXPECT_LT((d.direction - RigDirection(80.0, 5.0)).norm(), 1e-12);
+  EXPECT_DOUBLE_EQ(std::get<AmbientOcclusionLight>(rig.lights[1]).color.x(), 0.2);
+  // Without the ambient term: DirectionalRig's.
+  EXPECT_DOUBLE_EQ(std::get<AmbientOcclusionLight>(LightRigFromSpec("directional:-30:45").lights[1]).color.x(), 0.05);
+  EXPECT_NE(ErrorOf([] { LightRigFromSpec("directional:80"); }).find("directional:AZIMUTH:ELEVATION"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] { LightRigFromSpec("directional:80:x"); }).find("'x' is not a number"), std::string::npos);
+  EXPECT_NE(ErrorOf([] { LightRigFromSpec("directional:80:5:-1"); }).find("ambient -1"), std::string::npos);
+}
+
 TEST(Studio, GroundTruthProjectionsLandOnTheRenderedFace) {
   const Actor actor = GenerateActor(SampleRig(), 3, SmallActor());
   StudioOptions so;

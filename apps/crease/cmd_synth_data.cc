@@ -26,7 +26,7 @@ namespace {
 std::string LightChoices() {
   std::string names;
   for (const auto& n : LightRigNames()) names += (names.empty() ? "" : ", ") + n;
-  return names + ", or an environment map (.exr, .hdr)";
+  return names + ", directional:AZ:EL[:AMBIENT] (degrees), or an environment map (.exr, .hdr)";
 }
 
 void ParseSize(const std::string& size, StudioOptions* studio) {
