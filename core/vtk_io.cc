@@ -24,6 +24,7 @@
 #include "core/error.h"
 #include "core/file_util.h"
 #include "core/mesh_io.h"
+#include "core/vtp_check.h"
 
 namespace crease {
 namespace fs = std::filesystem;
@@ -188,13 +189,15 @@ void WriteVtp(const fs::path& path, const TriMesh& mesh, const std::vector<Verte
 
 TriMesh ReadVtp(const fs::path& path, std::vector<VertexField>* fields) {
   const std::string file = path.string();
-  RequireReadableFile(path);
+  const std::string bytes = ReadFileToString(path);
+  CheckVtpSizes(bytes, file);  // VTK trusts the sizes in the file (issue 19)
   vtkNew<vtkXMLPolyDataReader> reader;
   VtkMessages messages;
   messages.Watch(reader);
   reader->SetReaderErrorObserver(messages.callback());
   reader->SetParserErrorObserver(messages.callback());
-  reader->SetFileName(file.c_str());
+  reader->ReadFromInputStringOn();  // the bytes just checked, not the file again
+  reader->SetInputString(bytes);
   reader->Update();
   vtkPolyData* poly = reader->GetOutput();
   if (messages.has_error() || reader->GetErrorCode() != vtkErrorCode::NoError || poly == nullptr) {

@@ -35,7 +35,8 @@ void WriteVtp(const std::filesystem::path& path, const TriMesh& mesh,
 // texture-coordinate array (or an array named "UV") gives UV, the normals array
 // gives N. When `fields` is given it receives every other numeric point-data array
 // (#V × number of components). The mesh is checked with ValidateMesh. Throws
-// Error for a missing or malformed file.
+// Error for a missing or malformed file; every size in the file is checked
+// against the file's length before VTK allocates it (core/vtp_check.h).
 TriMesh ReadVtp(const std::filesystem::path& path, std::vector<VertexField>* fields = nullptr);
 
 // A ParaView time series (.pvd collection of .vtp files). Typical use:

@@ -8,6 +8,9 @@
 #include <fstream>
 #include <functional>
 #include <string>
+#include <utility>
+#include <vector>
+#include <fmt/format.h>
 
 #include "core/error.h"
 #include "core/file_util.h"
@@ -119,6 +122,51 @@ TEST(Vtp, MissingAndMalformedFilesAreClearErrors) {
             "<UnstructuredGrid></UnstructuredGrid>\n</VTKFile>\n");
   EXPECT_ERROR_HAS(ReadVtp(wrong_type), wrong_type.string() + ": not a readable VTK XML PolyData file");
   EXPECT_ERROR_HAS(ReadVtp(wrong_type), "Cannot find PolyData element");
+}
+
+// Issue 19: a binary VTP whose header or appended block headers lie made VTK crash
+// (SIGSEGV, SIGFPE) or ask for tens of gigabytes; each is now a clear error.
+TEST(Vtp, LyingSizesAreClearErrors) {
+  const fs::path file = TestDir() / "lies.vtp";
+  WriteVtp(file, TestSphere());
+  const std::string bytes = ReadFileToString(file);
+  const size_t appended = bytes.find('_', bytes.find("<AppendedData")) + 1;
+  auto replaced = [&](const std::string& from, const std::string& to) {
+    std::string b = bytes;
+    const size_t at = b.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    return b.replace(at, from.size(), to);
+  };
+  auto with_word = [&](int k, uint32_t value) {  // the first array's block header, UInt32 words
+    std::string b = bytes;
+    for (int i = 0; i < 4; ++i) b[appended + 4 * k + i] = static_cast<char>(value >> (8 * i) & 0xff);
+    return b;
+  };
+  const std::string points = fmt::format("NumberOfPoints=\"{}\"", TestSphere().num_vertices());
+  const std::string polys = fmt::format("NumberOfPolys=\"{}\"", TestSphere().num_faces());
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {replaced(points, "NumberOfPoints=\"-1\""), "NumberOfPoints=\"-1\" is not a count"},
+      {replaced(points, "NumberOfPoints=\"4000000000\""), "is not a count"},
+      {replaced(points, "NumberOfPoints=\"2000000000\""), "holds"},
+      {replaced(polys, "NumberOfPolys=\"2000000000\""), "array 'offsets' holds"},
+      {replaced("NumberOfComponents=\"3\"", "NumberOfComponents=\"2000000000\""), "holds"},
+      {with_word(0, 0), "holds 0 bytes"},
+      {with_word(1, 0), "bad compressed block sizes"},
+      {with_word(0, 0xFFFFFFFF), "past the end of the file"},
+  };
+  for (const auto& [content, message] : cases) {
+    WriteText(file, content);
+    EXPECT_ERROR_HAS(ReadVtp(file), file.string() + ": not a readable VTK XML PolyData file: ");
+    EXPECT_ERROR_HAS(ReadVtp(file), message);
+  }
+  // VTK sizes the connectivity by the last offset (here 4e9 values, 32 GB).
+  WriteVtp(file, TestSphere(), {}, /*binary=*/false);
+  std::string ascii = ReadFileToString(file);
+  const size_t end = ascii.find("</DataArray>", ascii.rfind("Name=\"offsets\""));
+  const std::string last = std::to_string(3 * TestSphere().num_faces());
+  ascii.replace(ascii.rfind(last, end), last.size(), "4000000000");
+  WriteText(file, ascii);
+  EXPECT_ERROR_HAS(ReadVtp(file), "Polys offsets end at 4000000000, but the connectivity holds");
 }
 
 TEST(Vtp, ReadsPolygonsAndStrips) {
