@@ -164,9 +164,19 @@ void SetFromJson(const json& j, const std::string& what, void* options,
   visit(options, reader);
 }
 
-// YAML scalars carry no type; convert them the way a person reads them.
+// The most nodes a YAML document may expand to, an alias counting again at every
+// use. A few lines of nested aliases ("a: &a [x,x,...]", "b: &b [*a,*a,...]", ...)
+// expand to 9^9 nodes and gigabytes; crease's largest configs have a few hundred.
+constexpr size_t kMaxYamlNodes = 100'000;
+
+// YAML scalars carry no type; convert them the way a person reads them. `count`
+// counts the nodes expanded so far (see kMaxYamlNodes).
 template <class Json>
-Json YamlToJson(const YAML::Node& node, const std::string& what) {
+Json YamlToJson(const YAML::Node& node, const std::string& what, size_t* count) {
+  if (++*count > kMaxYamlNodes) {
+    throw Error(fmt::format("{}: the YAML expands to more than {} nodes (nested aliases?)", what,
+                            kMaxYamlNodes));
+  }
   switch (node.Type()) {
     case YAML::NodeType::Null:
     case YAML::NodeType::Undefined:
@@ -191,12 +201,12 @@ Json YamlToJson(const YAML::Node& node, const std::string& what) {
     }
     case YAML::NodeType::Sequence: {
       Json a = Json::array();
-      for (const auto& e : node) a.push_back(YamlToJson<Json>(e, what));
+      for (const auto& e : node) a.push_back(YamlToJson<Json>(e, what, count));
       return a;
     }
     case YAML::NodeType::Map: {
       Json o = Json::object();
-      for (const auto& kv : node) o[kv.first.as<std::string>()] = YamlToJson<Json>(kv.second, what);
+      for (const auto& kv : node) o[kv.first.as<std::string>()] = YamlToJson<Json>(kv.second, what, count);
       return o;
     }
   }
@@ -211,7 +221,8 @@ Json LoadYaml(const std::string& yaml_text, const std::string& what) {
   } catch (const YAML::Exception& e) {
     throw Error(fmt::format("{}: malformed YAML: {}", what, e.what()));
   }
-  return YamlToJson<Json>(node, what);
+  size_t count = 0;
+  return YamlToJson<Json>(node, what, &count);
 }
 
 }  // namespace

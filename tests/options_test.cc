@@ -1,5 +1,6 @@
 #include "core/options.h"
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include "tests/test_util.h"
@@ -84,6 +85,20 @@ TEST(Options, UnknownKeysAndWrongTypesAreRejectedByName) {
   EXPECT_NE(e.find("expected a mapping"), std::string::npos) << e;
   e = ErrorOf([&] { SetOptionsFromJson(R"({"num_ferns": )", "bad.json", &o); });
   EXPECT_NE(e.find("bad.json: malformed JSON"), std::string::npos) << e;
+}
+
+// Issue 19: nested aliases ("billion laughs") expand to 9^9 nodes; the expansion
+// stops at a limit with an error naming the file instead of allocating gigabytes.
+TEST(Options, YamlAliasBombIsRefused) {
+  std::string yaml = "a: &a [x, x, x, x, x, x, x, x, x]\n";
+  for (char level = 'b'; level <= 'i'; ++level) {
+    const char prev = static_cast<char>(level - 1);
+    yaml += fmt::format("{}: &{} [", level, level);
+    for (int k = 0; k < 9; ++k) yaml += fmt::format("{}*{}", k ? ", " : "", prev);
+    yaml += "]\n";
+  }
+  const std::string e = ErrorOf([&] { YamlToJsonText(yaml, "bomb.yaml"); });
+  EXPECT_NE(e.find("bomb.yaml: the YAML expands to more than"), std::string::npos) << e;
 }
 
 // Two nested option structs registering one key (issue 18: one YAML key silently
