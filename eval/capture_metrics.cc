@@ -794,6 +794,7 @@ struct FrameLoopState {
   // Pools of the registered truth (CaptureEvalSummary::Registered), active frames.
   MapMoments reg_detail, reg_band, reg_layer_band, reg_truth_band, reg_truth_layer_band;
   int reg_frames = 0;
+  CaptureEvalSummary::Landmarks landmarks;  // sums until ReduceSummary
   cv::Mat chart_u, chart_v;  // R×R: each texel's own chart coordinates, texels
   // The slide: the true texel each tracked texel sees minus its own, texels, over the
   // wrinkle regions; per registered frame the medians of its length and of its u and
@@ -917,6 +918,34 @@ void MeasureTrackingJitter(const PreviousFrame& prev, int index, const FrameTrac
   }
 }
 
+// The landmark source's points of frame `index` (frames/NNNNNN.json "landmarks",
+// when it stored 68) against the truth's, added to the sums of `sum`.
+void AddLandmarkErrors(const CaptureEvalContext& c, int index, const FrameTruth& truth,
+                       CaptureEvalSummary::Landmarks* sum) {
+  const fs::path path = c.capture / "frames" / fmt::format("{:06d}.json", index);
+  if (!fs::is_regular_file(path) || truth.landmarks.rows() != kIbugNumPoints) return;
+  const json frame = ReadJsonFile(path);
+  if (!frame.contains("landmarks") || !frame["landmarks"].is_array() ||
+      frame["landmarks"].size() != static_cast<size_t>(kIbugNumPoints)) {
+    return;
+  }
+  MatX2d err(kIbugNumPoints, 2);
+  for (int i = 0; i < kIbugNumPoints; ++i) {
+    const json& p = frame["landmarks"][static_cast<size_t>(i)];
+    Require(p.is_array() && p.size() == 2 && p[0].is_number() && p[1].is_number(),
+            fmt::format("{}: landmarks[{}] is not a point [x, y]", path.string(), i));
+    err.row(i) = Eigen::RowVector2d(p[0].get<double>(), p[1].get<double>()) - truth.landmarks.row(i);
+  }
+  const double px = err.rowwise().norm().mean();
+  sum->px += px;
+  sum->iod += px / std::max(InterOcularDistance(truth.landmarks), 1.0);
+  for (size_t g = 0; g < kIbugGroups.size(); ++g) {
+    const auto part = err.middleRows(kIbugGroups[g].first, kIbugGroups[g].end - kIbugGroups[g].first);
+    sum->groups[g] += Eigen::Vector3d(part.rowwise().norm().mean(), part.col(0).mean(), part.col(1).mean());
+  }
+  ++sum->frames;
+}
+
 // Tracking (Fig. 11): 2D and 3D vertex errors, the refinement's stages at its flow
 // points, LK from the truth, the error-vector picture, and the jitter.
 FrameTrackingVectors EvaluateFrameTracking(const CaptureEvalContext& c, int index, const CaptureFrameArrays& arrays,
@@ -941,6 +970,7 @@ FrameTrackingVectors EvaluateFrameTracking(const CaptureEvalContext& c, int inde
   }
   v.refined_aligned = MeasureVertexErrors3d(c, arrays, t, e);
   MeasureTrackingJitter(st->previous, index, v, e);
+  AddLandmarkErrors(c, index, t.truth, &st->landmarks);
   return v;
 }
 
@@ -1262,6 +1292,13 @@ CaptureEvalSummary ReduceSummary(const CaptureEvalContext& c, const FrameLoopSta
   if (st.appearance) s.appearance = st.appearance->Result();
   s.registered = {st.reg_frames,           st.reg_detail.Result(),     st.reg_band.Result(),
                   st.reg_layer_band.Result(), st.reg_truth_band.Result(), st.reg_truth_layer_band.Result()};
+  s.landmarks = st.landmarks;
+  if (s.landmarks.frames > 0) {
+    const double n = s.landmarks.frames;
+    s.landmarks.px /= n;
+    s.landmarks.iod /= n;
+    for (Eigen::Vector3d& g : s.landmarks.groups) g /= n;
+  }
   if (st.slide_frames > 0) {
     const double scale = c.mm_per_texel / st.slide_frames;
     s.registered.slide_mm = st.slide_length * scale;
@@ -1333,6 +1370,14 @@ std::string CaptureEvalSummary::ToJson() const {
   } else {
     j["displacement"]["offset_mm"] = nullptr;
     j["displacement"]["offset_slide_mm"] = nullptr;
+  }
+  if (landmarks.frames > 0) {  // the capture stored its landmark source's points; else absent
+    json groups = json::object();
+    for (size_t g = 0; g < kIbugGroups.size(); ++g) {
+      groups[kIbugGroups[g].name] = {
+          {"px", landmarks.groups[g].x()}, {"dx", landmarks.groups[g].y()}, {"dy", landmarks.groups[g].z()}};
+    }
+    j["landmarks"] = {{"frames", landmarks.frames}, {"px", landmarks.px}, {"iod", landmarks.iod}, {"parts", groups}};
   }
   if (registered.frames > 0) {  // eval/registered_truth.h; else absent
     j["registered"] = {{"frames", registered.frames},
@@ -1444,6 +1489,16 @@ std::string CaptureEvalSummary::ToMarkdown() const {
   o << fmt::format("Prior error (the tracking rig's best least-squares fit to the true coarse mesh at the true "
                    "identity, the model error a blendshape prior cannot remove): {:.2f} px, {:.2f} mm\n\n",
                    prior_px, prior_mm);
+  if (landmarks.frames > 0) {
+    std::string parts;
+    for (size_t g = 0; g < kIbugGroups.size(); ++g) {
+      parts += fmt::format("{}{} {:.1f} px ({:+.1f}, {:+.1f})", g ? ", " : "", kIbugGroups[g].name,
+                           landmarks.groups[g].x(), landmarks.groups[g].y(), landmarks.groups[g].z());
+    }
+    o << fmt::format("Landmark source against the true landmarks, {} frames: {:.2f} px ({:.3f} IOD); by part, mean "
+                     "error (mean vector, +y down): {}\n\n",
+                     landmarks.frames, landmarks.px, landmarks.iod, parts);
+  }
   if (flow_frames > 0) {
     o << fmt::format("### Refinement steps at the flow points (Sec. 5.1), {} frames, {} points per frame\n\n"
                      "2D error against the true projections, px; beside each status, the error of u^t at the same "

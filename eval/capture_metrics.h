@@ -37,6 +37,7 @@
 #include "core/camera.h"
 #include "core/ray_caster.h"
 #include "core/tri_mesh.h"
+#include "core/ibug.h"
 #include "eval/appearance_ceiling.h"
 #include "pipeline/capture/capture_io.h"
 #include "pipeline/training/detail_extraction.h"
@@ -202,6 +203,17 @@ struct CaptureEvalSummary {
   // Rung A: a linear filter of the capture's own textures against D* (correlation[0])
   // and the wrinkle layer beyond the most neutral frame's (correlation[1]).
   AppearanceCeiling appearance;
+  // The landmark source's 68 points (the capture's frames/NNNNNN.json) against the
+  // truth's projected landmark vertices, means over the frames that stored them: the
+  // point-to-point error, px and / inter-ocular distance, and per face part
+  // (core/ibug.h kIbugGroups) the mean error and mean error vector (+y down), px.
+  // The jaw part is partly definitional: a detector follows the silhouette, the
+  // truth's jaw points are fixed vertices.
+  struct Landmarks {
+    int frames = 0;
+    double px = 0, iod = 0;
+    std::array<Eigen::Vector3d, kIbugGroups.size()> groups{};  // (error, dx, dy) per part
+  } landmarks;
   // The truth registered through the image (eval/registered_truth.h), pooled over
   // the active frames in the wrinkle regions: D^t against the registered D* (raw and
   // wrinkle band) and the registered wrinkle layer's band; and how much of the truth

@@ -297,6 +297,12 @@ LightRig MakeLightRig(const std::string& preset) {
     rim.color = Eigen::Vector3d(0.48, 0.5, 0.55);
     rig.lights = {sphere(-40.0, 30.0, 1500.0, 300.0, Eigen::Vector3d(0.90, 0.87, 0.82)),
                   sphere(50.0, 5.0, 1500.0, 400.0, Eigen::Vector3d(0.14, 0.15, 0.16)), rim, ambient(0.04)};
+  } else if (preset == "ceiling") {
+    // A room's ceiling light in front of and above the face (a large, soft source at
+    // 55° elevation: horizontal creases facing up catch it, those facing down shade),
+    // the glow of a screen from the front as fill, weak ambient.
+    rig.lights = {sphere(-15.0, 55.0, 1500.0, 450.0, Eigen::Vector3d(0.95, 0.92, 0.88)),
+                  sphere(5.0, -5.0, 1500.0, 400.0, Eigen::Vector3d(0.16, 0.17, 0.19)), ambient(0.06)};
   } else if (preset == "studio-env" || preset == "overcast" || preset == "window") {
     EnvironmentLight e;
     e.map = ProceduralEnvironment(preset == "studio-env" ? "studio" : preset);
@@ -308,7 +314,7 @@ LightRig MakeLightRig(const std::string& preset) {
 }
 
 std::vector<std::string> LightRigNames() {
-  return {"front", "raking-above", "raking-side", "studio", "studio-env", "overcast", "window"};
+  return {"front", "raking-above", "raking-side", "studio", "ceiling", "studio-env", "overcast", "window"};
 }
 
 }  // namespace crease

@@ -139,6 +139,8 @@ LightRig DirectionalRig(double azimuth_deg, double elevation_deg, double intensi
 //   raking-side    directional grazing from the right (80° azimuth)
 //   studio         key (large sphere light, upper left) + fill (sphere light, right) +
 //                  rim (directional from behind) + ambient occlusion
+//   ceiling        a room's ceiling light (large sphere light above the front, 55°
+//                  elevation) + a screen's glow from the front + ambient occlusion
 //   studio-env, overcast, window   the procedural environment maps
 // Throws Error naming the unknown preset and listing the known ones.
 LightRig MakeLightRig(const std::string& preset);

@@ -118,6 +118,13 @@ print(f"texture slide: ground-truth prior {prior['slide_mm']:.2f} mm, ground-tru
       f"truth band kept {prior['truth_band_correlation']:.2f} / {fit['truth_band_correlation']:.2f}")
 sys.exit(0 if fit["slide_mm"] < prior["slide_mm"] and fit["slide_mm"] < 1.0 and fit["truth_band_correlation"] > 0.5 else 1)
 PY
+# The landmark source's error by face part: the ground-truth prior's points are the truth's.
+python3 - "$tmp/cap/eval.json" <<'PY' || { echo "FAIL: landmark errors of the ground-truth prior"; fails=$((fails+1)); }
+import json, sys
+lm = json.load(open(sys.argv[1]))["landmarks"]
+print(f"ground-truth prior landmarks: {lm['px']:.3f} px over {lm['frames']} frames")
+sys.exit(0 if lm["frames"] >= 1 and lm["px"] < 0.5 and set(lm["parts"]) == {"jaw", "brows", "nose", "eyes", "mouth"} else 1)
+PY
 bad "prior and fit controls together" "exclude each other" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-prior --ground-truth-fit -o "$tmp/cap3"
 bad "capture missing model" "m3.cdm" "$crease" capture -i "$tmp/seq" --model "$tmp/m3.cdm" -o "$tmp/cap2"
 bad "capture model of another kind" "detail model" "$crease" capture -i "$tmp/seq" --model "$tmp/actor.json" -o "$tmp/cap2"

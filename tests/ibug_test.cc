@@ -22,5 +22,19 @@ TEST(Ibug, InterOcularDistanceRejectsFewerThan68Points) {
   EXPECT_ERROR_HAS(InterOcularDistance(MatX2d()), "68 iBUG landmarks");
 }
 
+TEST(Ibug, GroupsPartitionThe68PointsInOrder) {
+  int next = 0;
+  for (const IbugGroup& g : kIbugGroups) {
+    EXPECT_EQ(g.first, next) << g.name;
+    EXPECT_LT(g.first, g.end) << g.name;
+    next = g.end;
+  }
+  EXPECT_EQ(next, kIbugNumPoints);
+  // The named points fall in their parts.
+  EXPECT_STREQ(kIbugGroups[3].name, "eyes");
+  EXPECT_TRUE(kIbugRightEyeOuter >= kIbugGroups[3].first && kIbugLeftEyeOuter < kIbugGroups[3].end);
+  EXPECT_TRUE(kIbugNoseTip >= kIbugGroups[2].first && kIbugNoseTip < kIbugGroups[2].end);
+}
+
 }  // namespace
 }  // namespace crease
