@@ -73,9 +73,18 @@ void WriteFileAtomicVia(const fs::path& path, const std::function<void(const fs:
 
 void RequireReadableFile(const fs::path& path) {
   std::error_code ec;
-  if (!fs::exists(path, ec)) throw Error(fmt::format("{}: file does not exist", path.string()));
-  if (fs::is_directory(path, ec)) {
+  const fs::file_status status = fs::status(path, ec);  // follows symbolic links
+  if (ec && ec != std::errc::no_such_file_or_directory) {
+    throw Error(fmt::format("{}: cannot read: {}", path.string(), ec.message()));
+  }
+  if (!fs::exists(status)) throw Error(fmt::format("{}: file does not exist", path.string()));
+  if (fs::is_directory(status)) {
     throw Error(fmt::format("{}: is a folder, expected a file", path.string()));
+  }
+  // A device (/dev/zero) never ends and a FIFO can block forever (issue 19).
+  if (!fs::is_regular_file(status)) {
+    throw Error(fmt::format("{}: is not a regular file (a device, FIFO or socket); crease reads only "
+                            "regular files", path.string()));
   }
 }
 

@@ -26,7 +26,8 @@ void WriteFileAtomicVia(const std::filesystem::path& path,
 // Reads a whole file; throws Error "<path>: cannot open file" when missing.
 std::string ReadFileToString(const std::filesystem::path& path);
 
-// Throws Error "<path>: file does not exist" / "is a directory" as appropriate.
+// Throws Error "<path>: file does not exist" / "is a folder" / "is not a regular
+// file" (devices, FIFOs and sockets are refused: they may never end or block).
 void RequireReadableFile(const std::filesystem::path& path);
 
 // Lower-case extension including the dot (".ply"), "" when none.
