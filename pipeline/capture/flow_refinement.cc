@@ -241,6 +241,24 @@ double IntensityChange(const cv::Mat& image_a, const cv::Point2f& a, const cv::M
   return std::abs(Bilinear8(image_a, a.x, a.y) - Bilinear8(image_b, bx, by)) / 255.0;
 }
 
+// The frame's pyramid for Eq. 5's Lucas–Kanade (kept as the next frame's previous
+// pyramid). Returns the time it took, ms.
+double BuildFlowPyramid(const FlowRefinementOptions& o, const cv::Mat& gray8, std::vector<cv::Mat>* pyramid) {
+  const auto tp = Clock::now();
+  cv::buildOpticalFlowPyramid(gray8, *pyramid, cv::Size(o.lk_window, o.lk_window), o.lk_pyramid_levels - 1, true,
+                              cv::BORDER_REFLECT_101, cv::BORDER_CONSTANT, false);
+  return MsSince(tp);
+}
+
+// The point counts of ξ_β and the MLS recovery, into the frame's record.
+void RecordCounts(const RecoverCounts& counts, RefinedFrame* out) {
+  out->trusted = counts.trusted;
+  out->recovered = counts.recovered;
+  out->reset = counts.reset;
+  out->invisible = counts.invisible;
+  out->distance_outliers = counts.distance_outliers;
+}
+
 }  // namespace
 
 std::vector<uint8_t> TrackLucasKanade(const FlowRefinementOptions& o, cv::InputArray previous, cv::InputArray next,
@@ -330,6 +348,50 @@ struct FlowRefiner::Impl {
   LandmarkFrameFit SolveFit(const std::vector<int>& points, const std::vector<Eigen::Vector2d>& targets,
                             const std::vector<double>& weights, const Eigen::VectorXd& beta_tracker,
                             const Rigid3d& pose0) const;
+
+  // The steps of Refine, in order (see Refine).
+  // Input checks that need no tracked fit (the frame, the mask, α); throw Error.
+  void CheckFrame(const cv::Mat& gray8, const Eigen::VectorXd& identity, const std::vector<uint8_t>& visible) const;
+  // Input checks of a tracked frame (β, pose, landmarks); throw Error.
+  void CheckTracked(const TrackedFrame& tracked) const;
+  // Sec. 5.1 step 1: L^t (out->coarse_vertices; `head` keeps its head-frame vertices
+  // for F), u^t = P(v^t) at the flow points and which of them take part (`vis`, 0/1).
+  void EvaluateCoarse(const Eigen::VectorXd& identity, const LandmarkFrameFit& tf,
+                      const std::vector<uint8_t>& visible, Eigen::VectorXd* head, MatX2d* u,
+                      std::vector<uint8_t>* vis, RefinedFrame* out);
+  // Whether flow point i of L^t (camera frame) takes part in the flow: half an LK
+  // window inside the image, visible in the caller's mask, facing the camera.
+  bool FlowPointUsable(int i, const MatX3d& coarse, const MatX2d& u, const std::vector<uint8_t>& visible) const;
+  // Sec. 5.1 step 2: ũ^t and the status of each flow point before ξ_β: Eq. 5 and ξ_α
+  // from the previous frame, then Sec. 7's reference frame (flow_reference_frame) and
+  // the pull to the tracker (Differences 10). `flow` holds u^t on entry.
+  std::vector<FlowPointStatus> TrackFlow(const std::vector<cv::Mat>& pyramid, const MatX2d& u,
+                                         const std::vector<uint8_t>& vis, MatX2d* flow, RefinedFrame* out);
+  // Eq. 5 from ũ^{t−1} and the intensity test ξ_α: a point that passes both becomes
+  // kTrusted at its LK position; one failing ξ_α keeps kReset at its LK position, one
+  // that LK lost keeps kReset at u^t.
+  void TrackFromPrevious(const std::vector<cv::Mat>& pyramid, const MatX2d& u, const std::vector<uint8_t>& vis,
+                         MatX2d* flow, std::vector<FlowPointStatus>* status, RefinedFrame* out) const;
+  // Sec. 5.1 step 4 (Cao et al. 2014's post-processing): the 3D fit to the trusted and
+  // recovered flow positions and the visible inner landmarks.
+  LandmarkFrameFit FitToFlow(const MatX2d& flow, const std::vector<FlowPointStatus>& status,
+                             const TrackedFrame& tracked, const std::vector<uint8_t>& visible,
+                             bool use_landmarks) const;
+  // Sec. 5.1 step 5 (Li et al. 2013): the fitted mesh F = out->vertices (evaluated
+  // from `head` at out->fit) plus the Laplacian displacement d on the face chart.
+  // Returns the time spent evaluating F, which overlaps the solves (ms).
+  double FitAndDeform(const MatX2d& flow, const std::vector<FlowPointStatus>& status, const TrackedFrame& tracked,
+                      const std::vector<uint8_t>& visible, bool use_landmarks, Eigen::VectorXd* head,
+                      RefinedFrame* out) const;
+  // The right-hand sides (camera x, y) of the Laplacian system: w · (the back-projection
+  // of each flow point's and inner landmark's target at F's depth − F).
+  void LaplacianTargets(const LandmarkFrameFit& fit, const MatX2d& flow, const std::vector<FlowPointStatus>& status,
+                        const TrackedFrame& tracked, const std::vector<uint8_t>& visible, bool use_landmarks,
+                        Eigen::VectorXd* bx, Eigen::VectorXd* by) const;
+  // State for the next frame: ũ^t of L~^t at the flow points, u^t and its history,
+  // the visibility and the frame's pyramid (moved).
+  void Remember(const MatX3d& refined, const MatX2d& u, const std::vector<uint8_t>& vis,
+                std::vector<cv::Mat>* pyramid);
 };
 
 void FlowRefiner::Impl::Build() {
@@ -854,36 +916,27 @@ void FlowRefiner::Reset() {
   impl_->prev_pyramid.clear();
 }
 
-RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& tracked, const Eigen::VectorXd& identity,
-                                 const std::vector<uint8_t>& visible) {
-  const auto t_start = Clock::now();
-  Impl& s = *impl_;
-  const FlowRefinementOptions& o = options_;
+void FlowRefiner::Impl::CheckFrame(const cv::Mat& gray8, const Eigen::VectorXd& identity,
+                                   const std::vector<uint8_t>& visible) const {
   const char* what = "FlowRefiner::Refine";
-  const int V = s.V, E = s.E;
-  const int nf = static_cast<int>(s.flow_vertex.size());
-
-  // --- Input checks (before any state changes).
   if (gray8.empty()) throw Error(fmt::format("{}: the frame is empty", what));
   if (gray8.type() != CV_8UC1)
     throw Error(fmt::format("{}: the frame must be 8-bit gray (CV_8UC1), got type {} with {} channels", what,
                             gray8.type(), gray8.channels()));
-  if (!(gray8.cols == s.K.width && gray8.rows == s.K.height))
+  if (!(gray8.cols == K.width && gray8.rows == K.height))
     throw Error(fmt::format("{}: the frame is {}×{} but the camera intrinsics are {}×{}", what, gray8.cols, gray8.rows,
-                            s.K.width, s.K.height));
+                            K.width, K.height));
   if (!(visible.empty() || static_cast<int>(visible.size()) == V))
     throw Error(fmt::format("{}: the visibility mask has {} entries, expected one per rig vertex ({}) or none", what,
                             visible.size(), V));
-  if (identity.size() > s.I)
+  if (identity.size() > I)
     throw Error(
-        fmt::format("{}: {} identity coefficients for a rig with {} identity modes", what, identity.size(), s.I));
+        fmt::format("{}: {} identity coefficients for a rig with {} identity modes", what, identity.size(), I));
   if (!identity.allFinite()) throw Error(fmt::format("{}: the identity coefficients are not finite", what));
-  if (!tracked.tracked) {
-    Reset();
-    RefinedFrame none;
-    none.total_ms = MsSince(t_start);
-    return none;
-  }
+}
+
+void FlowRefiner::Impl::CheckTracked(const TrackedFrame& tracked) const {
+  const char* what = "FlowRefiner::Refine";
   const LandmarkFrameFit& tf = tracked.fit;
   if (tf.expression.size() != E)
     throw Error(
@@ -901,140 +954,99 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
       throw Error(fmt::format("{}: tracked landmark {} (iBUG {}) is not finite ({}, {})", what, i, i + 1,
                               tracked.landmarks(i, 0), tracked.landmarks(i, 1)));
   }
-  const bool use_landmarks = tracked.landmarks.rows() == LandmarkRigFitter::kNumLandmarks;
+}
 
-  RefinedFrame out;
-  out.refined = true;
-  out.flow_vertex = s.flow_vertex;
+void FlowRefiner::Impl::EvaluateCoarse(const Eigen::VectorXd& identity, const LandmarkFrameFit& tf,
+                                       const std::vector<uint8_t>& visible, Eigen::VectorXd* head, MatX2d* u,
+                                       std::vector<uint8_t>* vis, RefinedFrame* out) {
+  const auto te = Clock::now();
+  SetIdentity(identity);
+  *head = base_all;
+  AddExpressions(tf.expression, head);
+  out->coarse_vertices = ToCamera(*head, tf.cam_from_head);
+  *u = Project(out->coarse_vertices);
+  vis->assign(u->rows(), 0);
+  for (int i = 0; i < u->rows(); ++i) {
+    if (!u->row(i).allFinite()) continue;  // behind the camera
+    (*vis)[i] = FlowPointUsable(i, out->coarse_vertices, *u, visible);
+  }
+  out->projected_positions = *u;
+  out->evaluate_ms = MsSince(te);
+}
 
-  // --- L^t and the flow points' projections u^t, in parallel with the frame's pyramid.
-  const cv::Size win(o.lk_window, o.lk_window);
-  std::vector<cv::Mat> pyramid;
-  double pyramid_ms = 0.0;
-  auto build_pyramid = [&] {
-    const auto tp = Clock::now();
-    cv::buildOpticalFlowPyramid(gray8, pyramid, win, o.lk_pyramid_levels - 1, true, cv::BORDER_REFLECT_101,
-                                cv::BORDER_CONSTANT, false);
-    pyramid_ms = MsSince(tp);
-  };
-  Eigen::VectorXd head;
-  MatX2d u(nf, 2);
-  std::vector<uint8_t> vis(nf, 0);
-  auto evaluate_coarse = [&] {
-    const auto te = Clock::now();
-    s.SetIdentity(identity);
-    head = s.base_all;
-    s.AddExpressions(tf.expression, &head);
-    out.coarse_vertices = s.ToCamera(head, tf.cam_from_head);
-    const MatX3d& Lc = out.coarse_vertices;
-    const int half = o.lk_window / 2;
-    u = s.Project(Lc);
-    for (int i = 0; i < nf; ++i) {
-      if (!u.row(i).allFinite()) continue;  // behind the camera
-      const int v = s.flow_vertex[i];
-      const Eigen::Vector3d X = Lc.row(v).transpose();
-      bool ok =
-          u(i, 0) >= half && u(i, 1) >= half && u(i, 0) <= s.K.width - 1 - half && u(i, 1) <= s.K.height - 1 - half;
-      if (ok && !visible.empty()) ok = visible[v] != 0;
-      if (ok) {  // grazing windows track badly, with or without a mask
-        Eigen::Vector3d nrm = Eigen::Vector3d::Zero();
-        for (int k = s.ring_begin[i]; k < s.ring_begin[i + 1]; ++k) {
-          const int f = s.ring_triangle[k];
-          const Eigen::Vector3d p0 = Lc.row(s.chart_F(f, 0)).transpose();
-          nrm += (Lc.row(s.chart_F(f, 1)).transpose() - p0).cross(Lc.row(s.chart_F(f, 2)).transpose() - p0);
-        }
-        ok = nrm.dot(-X) >= o.front_facing_min_cos * nrm.norm() * X.norm() && nrm.norm() > 0.0;
-      }
-      vis[i] = ok;
+bool FlowRefiner::Impl::FlowPointUsable(int i, const MatX3d& coarse, const MatX2d& u,
+                                        const std::vector<uint8_t>& visible) const {
+  const int half = options.lk_window / 2;
+  const int v = flow_vertex[i];
+  const Eigen::Vector3d X = coarse.row(v).transpose();
+  bool ok = u(i, 0) >= half && u(i, 1) >= half && u(i, 0) <= K.width - 1 - half && u(i, 1) <= K.height - 1 - half;
+  if (ok && !visible.empty()) ok = visible[v] != 0;
+  if (ok) {  // grazing windows track badly, with or without a mask
+    Eigen::Vector3d nrm = Eigen::Vector3d::Zero();
+    for (int k = ring_begin[i]; k < ring_begin[i + 1]; ++k) {
+      const int f = ring_triangle[k];
+      const Eigen::Vector3d p0 = coarse.row(chart_F(f, 0)).transpose();
+      nrm += (coarse.row(chart_F(f, 1)).transpose() - p0).cross(coarse.row(chart_F(f, 2)).transpose() - p0);
     }
-    out.projected_positions = u;
-    out.evaluate_ms = MsSince(te);
-  };
-  tbb::parallel_invoke(build_pyramid, evaluate_coarse);
+    ok = nrm.dot(-X) >= options.front_facing_min_cos * nrm.norm() * X.norm() && nrm.norm() > 0.0;
+  }
+  return ok;
+}
 
-  // --- Lucas–Kanade from ũ^{t−1} (Eq. 5) and the intensity test ξ_α.
-  auto t0 = Clock::now();
-  MatX2d flow = u;
-  std::vector<FlowPointStatus> status(nf, FlowPointStatus::kInvisible);
-  for (int i = 0; i < nf; ++i)
+std::vector<FlowPointStatus> FlowRefiner::Impl::TrackFlow(const std::vector<cv::Mat>& pyramid, const MatX2d& u,
+                                                          const std::vector<uint8_t>& vis, MatX2d* flow,
+                                                          RefinedFrame* out) {
+  std::vector<FlowPointStatus> status(vis.size(), FlowPointStatus::kInvisible);
+  for (size_t i = 0; i < vis.size(); ++i)
     if (vis[i]) status[i] = FlowPointStatus::kReset;  // no flow yet (first frame: stays so)
-  if (s.has_prev) {
-    std::vector<int> idx;
-    std::vector<cv::Point2f> from, to;
-    for (int i = 0; i < nf; ++i) {
-      if (!vis[i] || !s.prev_visible[i] || !s.prev_refined.row(i).allFinite()) continue;
-      idx.push_back(i);
-      from.emplace_back(static_cast<float>(s.prev_refined(i, 0)), static_cast<float>(s.prev_refined(i, 1)));
-      Eigen::Vector2d start = s.prev_refined.row(i).transpose();
-      if (o.lk_predict_from_tracker && s.prev_projected.row(i).allFinite())
-        start += (u.row(i) - s.prev_projected.row(i)).transpose();
-      to.emplace_back(static_cast<float>(start.x()), static_cast<float>(start.y()));
-    }
-    out.no_source = static_cast<int>(std::count(vis.begin(), vis.end(), 1)) - static_cast<int>(idx.size());
-    if (!idx.empty()) {
-      const std::vector<uint8_t> lk_status =
-          TrackLucasKanade(o, s.prev_pyramid, pyramid, from, &to, o.lk_predict_from_tracker);
-      const cv::Mat& prev_image = s.prev_pyramid[0];
-      const cv::Mat& image = pyramid[0];
-      for (size_t k = 0; k < idx.size(); ++k) {
-        const int i = idx[k];
-        const double x = to[k].x, y = to[k].y;
-        if (!lk_status[k] || !std::isfinite(x) || !std::isfinite(y) || x < 0 || y < 0 || x > s.K.width - 1 ||
-            y > s.K.height - 1) {
-          ++out.lk_failures;
-          continue;  // outlier (kReset)
-        }
-        flow(i, 0) = x;
-        flow(i, 1) = y;
-        if (IntensityChange(prev_image, from[k], image, x, y) > o.outlier_intensity) {
-          ++out.intensity_outliers;
-          continue;  // outlier
-        }
-        status[i] = FlowPointStatus::kTrusted;
-      }
-    }
-  }
-  if (o.flow_reference_frame) s.TrackFromReference(pyramid, u, vis, &flow, status, &out);
-  s.PullToTracker(u, &flow, &status, &out);
-  out.flow_ms = pyramid_ms + MsSince(t0);
+  if (has_prev) TrackFromPrevious(pyramid, u, vis, flow, &status, out);
+  if (options.flow_reference_frame) TrackFromReference(pyramid, u, vis, flow, status, out);
+  PullToTracker(u, flow, &status, out);
+  return status;
+}
 
-  // --- ξ_β and MLS recovery.
-  t0 = Clock::now();
-  const RecoverCounts counts = RecoverFlowOutliers(o, s.neighbours, u, &flow, &status);
-  out.trusted = counts.trusted;
-  out.recovered = counts.recovered;
-  out.reset = counts.reset;
-  out.invisible = counts.invisible;
-  out.distance_outliers = counts.distance_outliers;
-  out.mls_ms = MsSince(t0);
-  out.flow_positions = flow;
-  out.status = status;
-  // State for the next frame: ũ^t of L~^t at the flow points.
-  auto remember = [&] {
-    s.prev_refined = s.Project(out.vertices);
-    const MatX2d unknown = MatX2d::Constant(u.rows(), 2, std::numeric_limits<double>::quiet_NaN());
-    const bool chained = s.has_prev && s.prev_projected.rows() == u.rows();
-    s.prev3_projected = chained && s.prev2_projected.rows() == u.rows() ? s.prev2_projected : unknown;
-    s.prev2_projected = chained ? s.prev_projected : unknown;
-    s.prev_projected = u;
-    s.prev_visible = vis;
-    s.prev_pyramid = std::move(pyramid);
-    s.has_prev = true;
-    out.total_ms = MsSince(t_start);
-  };
-  if (counts.trusted + counts.recovered == 0) {
-    // No point measured by flow (the first frame, or after a loss): L~^t = L^t. A fit
-    // to the landmarks alone would re-solve the tracker's problem under other weights
-    // and priors, and every later frame's flow would start from its error.
-    out.fit = tf;
-    out.vertices = out.coarse_vertices;
-    out.fit_positions = u;
-    remember();
-    return out;
+void FlowRefiner::Impl::TrackFromPrevious(const std::vector<cv::Mat>& pyramid, const MatX2d& u,
+                                          const std::vector<uint8_t>& vis, MatX2d* flow,
+                                          std::vector<FlowPointStatus>* status, RefinedFrame* out) const {
+  const FlowRefinementOptions& o = options;
+  std::vector<int> idx;
+  std::vector<cv::Point2f> from, to;
+  for (int i = 0; i < static_cast<int>(vis.size()); ++i) {
+    if (!vis[i] || !prev_visible[i] || !prev_refined.row(i).allFinite()) continue;
+    idx.push_back(i);
+    from.emplace_back(static_cast<float>(prev_refined(i, 0)), static_cast<float>(prev_refined(i, 1)));
+    Eigen::Vector2d start = prev_refined.row(i).transpose();
+    if (o.lk_predict_from_tracker && prev_projected.row(i).allFinite())
+      start += (u.row(i) - prev_projected.row(i)).transpose();
+    to.emplace_back(static_cast<float>(start.x()), static_cast<float>(start.y()));
   }
+  out->no_source = static_cast<int>(std::count(vis.begin(), vis.end(), 1)) - static_cast<int>(idx.size());
+  if (idx.empty()) return;
+  const std::vector<uint8_t> lk_status =
+      TrackLucasKanade(o, prev_pyramid, pyramid, from, &to, o.lk_predict_from_tracker);
+  for (size_t k = 0; k < idx.size(); ++k) {
+    const int i = idx[k];
+    const double x = to[k].x, y = to[k].y;
+    if (!lk_status[k] || !std::isfinite(x) || !std::isfinite(y) || x < 0 || y < 0 || x > K.width - 1 ||
+        y > K.height - 1) {
+      ++out->lk_failures;
+      continue;  // outlier (kReset)
+    }
+    (*flow)(i, 0) = x;
+    (*flow)(i, 1) = y;
+    if (IntensityChange(prev_pyramid[0], from[k], pyramid[0], x, y) > o.outlier_intensity) {
+      ++out->intensity_outliers;
+      continue;  // outlier (ξ_α)
+    }
+    (*status)[i] = FlowPointStatus::kTrusted;
+  }
+}
 
-  // --- 3D fit with the refined 2D positions and the tracker's landmarks.
-  t0 = Clock::now();
+LandmarkFrameFit FlowRefiner::Impl::FitToFlow(const MatX2d& flow, const std::vector<FlowPointStatus>& status,
+                                              const TrackedFrame& tracked, const std::vector<uint8_t>& visible,
+                                              bool use_landmarks) const {
+  const FlowRefinementOptions& o = options;
+  const int nf = static_cast<int>(flow_vertex.size());
   std::vector<int> points;
   std::vector<Eigen::Vector2d> targets;
   std::vector<double> weights;
@@ -1047,80 +1059,161 @@ RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& track
     }
   }
   if (use_landmarks && o.fit_landmark_weight > 0.0) {
-    for (size_t j = 0; j < s.landmark_ibug.size(); ++j) {
-      if (!visible.empty() && !visible[s.landmark_vertex[j]]) continue;
+    for (size_t j = 0; j < landmark_ibug.size(); ++j) {
+      if (!visible.empty() && !visible[landmark_vertex[j]]) continue;
       points.push_back(nf + static_cast<int>(j));
-      targets.push_back(tracked.landmarks.row(s.landmark_ibug[j]).transpose());
+      targets.push_back(tracked.landmarks.row(landmark_ibug[j]).transpose());
       weights.push_back(o.fit_landmark_weight);
     }
   }
-  out.fit = s.SolveFit(points, targets, weights, tf.expression, tf.cam_from_head);
-  out.fit_ms = MsSince(t0);
+  return SolveFit(points, targets, weights, tracked.fit.expression, tracked.fit.cam_from_head);
+}
 
-  // --- Fitted mesh F and the Laplacian deformation L~ = F + d. The right-hand side
-  // needs F only at the fit points (from their basis rows), so the solves run in
-  // parallel with the evaluation of all of F.
-  t0 = Clock::now();
-  const bool deform = o.laplacian && s.solver_ok;
+double FlowRefiner::Impl::FitAndDeform(const MatX2d& flow, const std::vector<FlowPointStatus>& status,
+                                       const TrackedFrame& tracked, const std::vector<uint8_t>& visible,
+                                       bool use_landmarks, Eigen::VectorXd* head, RefinedFrame* out) const {
+  // The right-hand side needs F only at the fit points (from their basis rows), so
+  // the solves run in parallel with the evaluation of all of F.
+  const bool deform = options.laplacian && solver_ok;
   Eigen::VectorXd bx, by, dx, dy;
-  if (deform) {
-    bx = Eigen::VectorXd::Zero(s.num_free);
-    by = Eigen::VectorXd::Zero(s.num_free);
-    const Eigen::Matrix3d R = out.fit.cam_from_head.rotation.toRotationMatrix();
-    // w · (back-projection of the target at the fitted depth − fitted), camera x, y.
-    auto add = [&](int k, int f, const Eigen::Vector2d& target, double w) {
-      const Eigen::Vector3d x =
-          s.fit_base.segment<3>(3 * k) + Eigen::Vector3d(s.fit_B.row(3 * k).dot(out.fit.expression),
-                                                         s.fit_B.row(3 * k + 1).dot(out.fit.expression),
-                                                         s.fit_B.row(3 * k + 2).dot(out.fit.expression));
-      const Eigen::Vector3d X = R * x + out.fit.cam_from_head.translation;
-      if (!(X.z() > 1e-6) || !target.allFinite()) return;
-      bx[f] += w * ((target.x() - s.K.cx) * X.z() / s.K.fx - X.x());
-      by[f] += w * ((target.y() - s.K.cy) * X.z() / s.K.fy - X.y());
-    };
-    for (int i = 0; i < nf; ++i) {
-      if (s.flow_free[i] < 0) continue;
-      if (status[i] == FlowPointStatus::kTrusted || status[i] == FlowPointStatus::kRecovered)
-        add(i, s.flow_free[i], flow.row(i).transpose(), o.laplacian_flow_weight);
-    }
-    if (use_landmarks) {
-      for (size_t j = 0; j < s.landmark_ibug.size(); ++j) {
-        if (s.landmark_free[j] < 0) continue;
-        if (!visible.empty() && !visible[s.landmark_vertex[j]]) continue;
-        add(nf + static_cast<int>(j), s.landmark_free[j], tracked.landmarks.row(s.landmark_ibug[j]).transpose(),
-            o.laplacian_landmark_weight);
-      }
-    }
-  }
-  double evaluate2_ms = 0.0;
+  if (deform) LaplacianTargets(out->fit, flow, status, tracked, visible, use_landmarks, &bx, &by);
+  double evaluate_ms = 0.0;
   tbb::parallel_invoke(
       [&] {
-        if (deform) dx = s.solver.solve(bx);
+        if (deform) dx = solver.solve(bx);
       },
       [&] {
-        if (deform) dy = s.solver.solve(by);
+        if (deform) dy = solver.solve(by);
       },
       [&] {
         const auto te = Clock::now();
-        s.AddExpressions(out.fit.expression - tf.expression, &head);
-        out.vertices = s.ToCamera(head, out.fit.cam_from_head);
-        out.fit_positions = s.Project(out.vertices);
-        evaluate2_ms = MsSince(te);
+        AddExpressions(out->fit.expression - tracked.fit.expression, head);
+        out->vertices = ToCamera(*head, out->fit.cam_from_head);
+        out->fit_positions = Project(out->vertices);
+        evaluate_ms = MsSince(te);
       });
-  out.evaluate_ms += evaluate2_ms;
-  if (deform) {
-    MatX3d& F = out.vertices;
-    const int nc = static_cast<int>(s.chart_vertex.size());
+  if (deform) {  // L~ = F + d
+    MatX3d& F = out->vertices;
+    const int nc = static_cast<int>(chart_vertex.size());
     for (int c = 0; c < nc; ++c) {
-      const int f = s.free_of[c];
+      const int f = free_of[c];
       if (f < 0) continue;
-      F(s.chart_vertex[c], 0) += dx[f];
-      F(s.chart_vertex[c], 1) += dy[f];
+      F(chart_vertex[c], 0) += dx[f];
+      F(chart_vertex[c], 1) += dy[f];
     }
   }
-  // (the fitted mesh's evaluation overlaps the solves; it is counted in evaluate_ms)
-  out.laplacian_ms = std::max(0.0, MsSince(t0) - evaluate2_ms);
-  remember();
+  return evaluate_ms;
+}
+
+void FlowRefiner::Impl::LaplacianTargets(const LandmarkFrameFit& fit, const MatX2d& flow,
+                                         const std::vector<FlowPointStatus>& status, const TrackedFrame& tracked,
+                                         const std::vector<uint8_t>& visible, bool use_landmarks,
+                                         Eigen::VectorXd* bx, Eigen::VectorXd* by) const {
+  const int nf = static_cast<int>(flow_vertex.size());
+  *bx = Eigen::VectorXd::Zero(num_free);
+  *by = Eigen::VectorXd::Zero(num_free);
+  const Eigen::Matrix3d R = fit.cam_from_head.rotation.toRotationMatrix();
+  // w · (back-projection of the target at the fitted depth − fitted), camera x, y.
+  auto add = [&](int k, int f, const Eigen::Vector2d& target, double w) {
+    const Eigen::Vector3d x =
+        fit_base.segment<3>(3 * k) + Eigen::Vector3d(fit_B.row(3 * k).dot(fit.expression),
+                                                     fit_B.row(3 * k + 1).dot(fit.expression),
+                                                     fit_B.row(3 * k + 2).dot(fit.expression));
+    const Eigen::Vector3d X = R * x + fit.cam_from_head.translation;
+    if (!(X.z() > 1e-6) || !target.allFinite()) return;
+    (*bx)[f] += w * ((target.x() - K.cx) * X.z() / K.fx - X.x());
+    (*by)[f] += w * ((target.y() - K.cy) * X.z() / K.fy - X.y());
+  };
+  for (int i = 0; i < nf; ++i) {
+    if (flow_free[i] < 0) continue;
+    if (status[i] == FlowPointStatus::kTrusted || status[i] == FlowPointStatus::kRecovered)
+      add(i, flow_free[i], flow.row(i).transpose(), options.laplacian_flow_weight);
+  }
+  if (!use_landmarks) return;
+  for (size_t j = 0; j < landmark_ibug.size(); ++j) {
+    if (landmark_free[j] < 0) continue;
+    if (!visible.empty() && !visible[landmark_vertex[j]]) continue;
+    add(nf + static_cast<int>(j), landmark_free[j], tracked.landmarks.row(landmark_ibug[j]).transpose(),
+        options.laplacian_landmark_weight);
+  }
+}
+
+void FlowRefiner::Impl::Remember(const MatX3d& refined, const MatX2d& u, const std::vector<uint8_t>& vis,
+                                 std::vector<cv::Mat>* pyramid) {
+  prev_refined = Project(refined);
+  const MatX2d unknown = MatX2d::Constant(u.rows(), 2, std::numeric_limits<double>::quiet_NaN());
+  const bool chained = has_prev && prev_projected.rows() == u.rows();
+  prev3_projected = chained && prev2_projected.rows() == u.rows() ? prev2_projected : unknown;
+  prev2_projected = chained ? prev_projected : unknown;
+  prev_projected = u;
+  prev_visible = vis;
+  prev_pyramid = std::move(*pyramid);
+  has_prev = true;
+}
+
+// Sec. 5.1 per frame: L^t and u^t (step 1), Eq. 5 and ξ_α (2), ξ_β and MLS (3),
+// the 3D fit (4), the Laplacian deformation (5); see the header.
+RefinedFrame FlowRefiner::Refine(const cv::Mat& gray8, const TrackedFrame& tracked, const Eigen::VectorXd& identity,
+                                 const std::vector<uint8_t>& visible) {
+  const auto t_start = Clock::now();
+  Impl& s = *impl_;
+  const FlowRefinementOptions& o = options_;
+  s.CheckFrame(gray8, identity, visible);  // before any state changes
+  if (!tracked.tracked) {
+    Reset();
+    RefinedFrame none;
+    none.total_ms = MsSince(t_start);
+    return none;
+  }
+  s.CheckTracked(tracked);
+  const bool use_landmarks = tracked.landmarks.rows() == LandmarkRigFitter::kNumLandmarks;
+  RefinedFrame out;
+  out.refined = true;
+  out.flow_vertex = s.flow_vertex;
+
+  // --- Step 1: L^t and the flow points' projections u^t, in parallel with the frame's pyramid.
+  std::vector<cv::Mat> pyramid;
+  double pyramid_ms = 0.0;
+  Eigen::VectorXd head;
+  MatX2d u;
+  std::vector<uint8_t> vis;
+  tbb::parallel_invoke([&] { pyramid_ms = BuildFlowPyramid(o, gray8, &pyramid); },
+                       [&] { s.EvaluateCoarse(identity, tracked.fit, visible, &head, &u, &vis, &out); });
+
+  // --- Step 2: Lucas–Kanade from ũ^{t−1} (Eq. 5) and ξ_α.
+  auto t0 = Clock::now();
+  MatX2d flow = u;
+  std::vector<FlowPointStatus> status = s.TrackFlow(pyramid, u, vis, &flow, &out);
+  out.flow_ms = pyramid_ms + MsSince(t0);
+
+  // --- Step 3: ξ_β and MLS recovery.
+  t0 = Clock::now();
+  const RecoverCounts counts = RecoverFlowOutliers(o, s.neighbours, u, &flow, &status);
+  RecordCounts(counts, &out);
+  out.mls_ms = MsSince(t0);
+  out.flow_positions = flow;
+  out.status = status;
+  if (counts.trusted + counts.recovered == 0) {
+    // No point measured by flow (the first frame, or after a loss): L~^t = L^t. A fit
+    // to the landmarks alone would re-solve the tracker's problem under other weights
+    // and priors, and every later frame's flow would start from its error.
+    out.fit = tracked.fit;
+    out.vertices = out.coarse_vertices;
+    out.fit_positions = u;
+  } else {
+    // --- Step 4: 3D fit with the refined 2D positions and the tracker's landmarks.
+    t0 = Clock::now();
+    out.fit = s.FitToFlow(flow, status, tracked, visible, use_landmarks);
+    out.fit_ms = MsSince(t0);
+    // --- Step 5: fitted mesh F and the Laplacian deformation L~ = F + d (F's evaluation
+    // overlaps the solves; it is counted in evaluate_ms).
+    t0 = Clock::now();
+    const double evaluate_f_ms = s.FitAndDeform(flow, status, tracked, visible, use_landmarks, &head, &out);
+    out.evaluate_ms += evaluate_f_ms;
+    out.laplacian_ms = std::max(0.0, MsSince(t0) - evaluate_f_ms);
+  }
+  s.Remember(out.vertices, u, vis, &pyramid);
+  out.total_ms = MsSince(t_start);
   return out;
 }
 
