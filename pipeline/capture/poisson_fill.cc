@@ -90,6 +90,46 @@ std::vector<int> Chunks(const std::vector<Run>& runs, int texels) {
   return begin;
 }
 
+// The fine labels: kOutside / kKnown / kUnknown per texel (known counts only in the domain).
+cv::Mat LabelTexels(const cv::Mat& domain, const cv::Mat& known) {
+  const int R = domain.rows;
+  cv::Mat label(R, R, CV_8U);
+  for (int y = 0; y < R; ++y) {
+    const uint8_t* d = domain.ptr<uint8_t>(y);
+    const uint8_t* k = known.ptr<uint8_t>(y);
+    uint8_t* l = label.ptr<uint8_t>(y);
+    for (int x = 0; x < R; ++x) l[x] = !d[x] ? kOutside : (k[x] ? kKnown : kUnknown);
+  }
+  return label;
+}
+
+// Weights w_i with Σ_i w_i f_i = the least-squares affine fit of the values f_i at
+// `texels`, evaluated at (cx, cy) (exact for linear fields). A full block of s² texels,
+// and degenerate configurations (collinear texels), take the plain mean.
+std::vector<double> AffineFitWeights(const std::vector<std::pair<int, int>>& texels, double cx, double cy, int s) {
+  const int k = static_cast<int>(texels.size());
+  std::vector<double> w(k, 1.0 / k);
+  if (k < s * s) {
+    Eigen::Matrix3d AtA = Eigen::Matrix3d::Zero();
+    for (const auto& [x, y] : texels) {
+      const Eigen::Vector3d a(1.0, x - cx, y - cy);
+      AtA += a * a.transpose();
+    }
+    Eigen::Matrix3d inv;
+    bool invertible = false;
+    double det = 0.0;
+    AtA.computeInverseAndDetWithCheck(inv, det, invertible, 1e-9 * std::pow(AtA.trace(), 3));
+    if (invertible) {
+      const Eigen::Vector3d g = inv.col(0);  // (AᵀA)⁻¹ e1
+      for (int i = 0; i < k; ++i) w[i] = g[0] + g[1] * (texels[i].first - cx) + g[2] * (texels[i].second - cy);
+    }
+  }
+  return w;
+}
+
+// The 4-neighbours of a coarse node, (dI, dJ).
+constexpr int kDi[4] = {1, -1, 0, 0}, kDj[4] = {0, 0, 1, -1};
+
 }  // namespace
 
 struct PoissonFill::Impl {
@@ -121,45 +161,59 @@ struct PoissonFill::Impl {
     float inv_den;
   };
   std::vector<BandTexel> band[2];
+
+  // The constructor's steps, in order (see poisson_fill.h, "Solver").
+  // Map size R, block size s, coarse size Rc and the options that hold per frame.
+  void SetSizes(int map_size, const PoissonFillOptions& options);
+  // The runs of outside and unknown texels (and their parallel chunks).
+  void SetRuns(const cv::Mat& label);
+  // Step 1: the type of each coarse node (block) from its share of known / domain texels.
+  void ClassifyBlocks(const cv::Mat& label);
+  uint8_t TypeAt(int I, int J) const {
+    if (I < 0 || J < 0 || I >= Rc || J >= Rc) return kCoarseOutside;
+    return node_type[static_cast<size_t>(J) * Rc + I];
+  }
+  // Step 1, "neumann": components of vars without a known neighbour are singular → dropped (0).
+  void DropUnanchoredComponents();
+  // Step 2: the bilinear weights of each fine coordinate.
+  void SetBilinearWeights();
+  // Step 1: the coarse 5-point Laplace system, its factorisation and its right-hand
+  // side's (var, known node) pairs. Marks in `needed` the nodes around the vars.
+  void FactoriseCoarseSystem(std::vector<uint8_t>* needed);
+  // Step 2: marks in `needed` the nodes the interpolation of any unknown texel reads.
+  void MarkInterpolatedNodes(std::vector<uint8_t>* needed) const;
+  // The needed known nodes and ("neumann") the needed outside nodes' sources.
+  void CollectNeededNodes(std::vector<uint8_t>* needed);
+  // Step 1: each needed known node's value as weights of its block's known texels.
+  void FitKnownBlocks(const cv::Mat& label);
+  // Step 3: the unknown texels within `band_texels` of a known texel (or, "zero", of
+  // the domain's edge), by colour, with their 5-point denominators.
+  void BuildBand(const cv::Mat& label, int band_texels);
 };
 
-PoissonFill::PoissonFill(const cv::Mat& domain, const cv::Mat& known, const PoissonFillOptions& options)
-    : impl_(std::make_unique<Impl>()) {
-  options.Check();
-  RequireMask(domain, "domain");
-  RequireMask(known, "known");
-  Require(known.size() == domain.size(), fmt::format("PoissonFill: the known mask is {}x{}, the domain mask {}x{}",
-                                                     known.cols, known.rows, domain.cols, domain.rows));
-  Impl& m = *impl_;
-  m.R = domain.rows;
-  Require(m.R >= 2 && m.R <= 65535, fmt::format("PoissonFill: map size {} must be in [2, 65535]", m.R));
-  m.s = std::max(1, m.R / options.fill_resolution);
-  Require(m.R % m.s == 0, fmt::format("PoissonFill: map size {} is not a multiple of the block size {} "
-                                      "(R / fill_resolution = {} / {}); choose fill_resolution so that it is",
-                                      m.R, m.s, m.R, options.fill_resolution));
-  m.Rc = m.R / m.s;
-  Require(m.Rc >= 2, fmt::format("PoissonFill: coarse grid {}x{} is too small", m.Rc, m.Rc));
-  m.zero_boundary = options.fill_boundary == "zero";
-  m.sweeps = m.s > 1 ? options.fill_smoothing_sweeps : 0;
-  const int R = m.R, s = m.s, Rc = m.Rc;
-  const bool zero = m.zero_boundary;
+void PoissonFill::Impl::SetSizes(int map_size, const PoissonFillOptions& options) {
+  R = map_size;
+  Require(R >= 2 && R <= 65535, fmt::format("PoissonFill: map size {} must be in [2, 65535]", R));
+  s = std::max(1, R / options.fill_resolution);
+  Require(R % s == 0, fmt::format("PoissonFill: map size {} is not a multiple of the block size {} "
+                                  "(R / fill_resolution = {} / {}); choose fill_resolution so that it is",
+                                  R, s, R, options.fill_resolution));
+  Rc = R / s;
+  Require(Rc >= 2, fmt::format("PoissonFill: coarse grid {}x{} is too small", Rc, Rc));
+  zero_boundary = options.fill_boundary == "zero";
+  sweeps = s > 1 ? options.fill_smoothing_sweeps : 0;
+}
 
-  // Fine labels.
-  cv::Mat label(R, R, CV_8U);
-  for (int y = 0; y < R; ++y) {
-    const uint8_t* d = domain.ptr<uint8_t>(y);
-    const uint8_t* k = known.ptr<uint8_t>(y);
-    uint8_t* l = label.ptr<uint8_t>(y);
-    for (int x = 0; x < R; ++x) l[x] = !d[x] ? kOutside : (k[x] ? kKnown : kUnknown);
-  }
-  m.outside_runs = RunsOf(label, kOutside);
-  m.unknown_runs = RunsOf(label, kUnknown);
-  m.outside_chunks = Chunks(m.outside_runs, 16384);
-  m.unknown_chunks = Chunks(m.unknown_runs, 16384);
-  for (const Run& r : m.unknown_runs) m.num_unknown += r.length;
+void PoissonFill::Impl::SetRuns(const cv::Mat& label) {
+  outside_runs = RunsOf(label, kOutside);
+  unknown_runs = RunsOf(label, kUnknown);
+  outside_chunks = Chunks(outside_runs, 16384);
+  unknown_chunks = Chunks(unknown_runs, 16384);
+  for (const Run& r : unknown_runs) num_unknown += r.length;
+}
 
-  // Coarse node types.
-  m.node_type.assign(static_cast<size_t>(Rc) * Rc, kCoarseOutside);
+void PoissonFill::Impl::ClassifyBlocks(const cv::Mat& label) {
+  node_type.assign(static_cast<size_t>(Rc) * Rc, kCoarseOutside);
   for (int J = 0; J < Rc; ++J) {
     for (int I = 0; I < Rc; ++I) {
       int in_domain = 0, in_known = 0;
@@ -177,57 +231,53 @@ PoissonFill::PoissonFill(const cv::Mat& domain, const cv::Mat& known, const Pois
       uint8_t t = kCoarseOutside;
       if (2 * in_known >= s * s) {
         t = kCoarseKnown;
-      } else if (zero ? 2 * in_domain >= s * s : in_domain > 0) {
+      } else if (zero_boundary ? 2 * in_domain >= s * s : in_domain > 0) {
         t = kCoarseVar;
       }
-      m.node_type[static_cast<size_t>(J) * Rc + I] = t;
+      node_type[static_cast<size_t>(J) * Rc + I] = t;
     }
   }
-  auto type_at = [&](int I, int J) -> uint8_t {
-    if (I < 0 || J < 0 || I >= Rc || J >= Rc) return kCoarseOutside;
-    return m.node_type[static_cast<size_t>(J) * Rc + I];
-  };
-  const int di[4] = {1, -1, 0, 0}, dj[4] = {0, 0, 1, -1};
+}
 
-  // Neumann: components of vars without a known neighbour are singular → dropped (0).
-  if (!m.zero_boundary) {
-    std::vector<uint8_t> seen(m.node_type.size(), 0);
-    for (int start = 0; start < Rc * Rc; ++start) {
-      if (m.node_type[start] != kCoarseVar || seen[start]) continue;
-      std::vector<int> component;
-      std::deque<int> queue = {start};
-      seen[start] = 1;
-      bool anchored = false;
-      while (!queue.empty()) {
-        const int n = queue.front();
-        queue.pop_front();
-        component.push_back(n);
-        const int I = n % Rc, J = n / Rc;
-        for (int e = 0; e < 4; ++e) {
-          const uint8_t t = type_at(I + di[e], J + dj[e]);
-          if (t == kCoarseKnown) anchored = true;
-          if (t == kCoarseVar) {
-            const int q = (J + dj[e]) * Rc + I + di[e];
-            if (!seen[q]) {
-              seen[q] = 1;
-              queue.push_back(q);
-            }
+void PoissonFill::Impl::DropUnanchoredComponents() {
+  std::vector<uint8_t> seen(node_type.size(), 0);
+  for (int start = 0; start < Rc * Rc; ++start) {
+    if (node_type[start] != kCoarseVar || seen[start]) continue;
+    std::vector<int> component;
+    std::deque<int> queue = {start};
+    seen[start] = 1;
+    bool anchored = false;
+    while (!queue.empty()) {
+      const int n = queue.front();
+      queue.pop_front();
+      component.push_back(n);
+      const int I = n % Rc, J = n / Rc;
+      for (int e = 0; e < 4; ++e) {
+        const uint8_t t = TypeAt(I + kDi[e], J + kDj[e]);
+        if (t == kCoarseKnown) anchored = true;
+        if (t == kCoarseVar) {
+          const int q = (J + kDj[e]) * Rc + I + kDi[e];
+          if (!seen[q]) {
+            seen[q] = 1;
+            queue.push_back(q);
           }
         }
       }
-      if (!anchored) {
-        for (int n : component) {
-          m.node_type[n] = kCoarseDropped;
-          m.dropped_nodes.push_back(n);
-        }
+    }
+    if (!anchored) {
+      for (int n : component) {
+        node_type[n] = kCoarseDropped;
+        dropped_nodes.push_back(n);
       }
     }
-    std::sort(m.dropped_nodes.begin(), m.dropped_nodes.end());
   }
+  std::sort(dropped_nodes.begin(), dropped_nodes.end());
+}
 
-  // Bilinear weights: fine coordinate x lies at coarse X = (x + 0.5)/s − 0.5.
-  m.i0.resize(R);
-  m.f.resize(R);
+void PoissonFill::Impl::SetBilinearWeights() {
+  // Fine coordinate x lies at coarse X = (x + 0.5)/s − 0.5.
+  i0.resize(R);
+  f.resize(R);
   for (int x = 0; x < R; ++x) {
     const double X = (x + 0.5) / s - 0.5;
     int I = static_cast<int>(std::floor(X));
@@ -240,160 +290,175 @@ PoissonFill::PoissonFill(const cv::Mat& domain, const cv::Mat& known, const Pois
       fr = X - (Rc - 2) > 1.0 ? 1.0 : X - (Rc - 2);
       I = Rc - 2;
     }
-    m.i0[x] = I;
-    m.f[x] = static_cast<float>(fr);
+    i0[x] = I;
+    f[x] = static_cast<float>(fr);
   }
+}
 
-  // Var indices and the coarse matrix.
-  std::vector<int32_t> var_of(m.node_type.size(), -1);
+void PoissonFill::Impl::FactoriseCoarseSystem(std::vector<uint8_t>* needed) {
+  std::vector<int32_t> var_of(node_type.size(), -1);
   for (int n = 0; n < Rc * Rc; ++n) {
-    if (m.node_type[n] == kCoarseVar) {
-      var_of[n] = static_cast<int32_t>(m.var_node.size());
-      m.var_node.push_back(n);
+    if (node_type[n] == kCoarseVar) {
+      var_of[n] = static_cast<int32_t>(var_node.size());
+      var_node.push_back(n);
     }
   }
-  m.num_vars = static_cast<int>(m.var_node.size());
-  std::vector<uint8_t> needed(m.node_type.size(), 0);  // known / outside nodes near a var
-  if (m.num_vars > 0) {
-    std::vector<Eigen::Triplet<double>> triplets;
-    triplets.reserve(static_cast<size_t>(m.num_vars) * 5);
-    for (int v = 0; v < m.num_vars; ++v) {
-      const int n = m.var_node[v];
-      const int I = n % Rc, J = n / Rc;
-      double diag = 0.0;
-      for (int e = 0; e < 4; ++e) {
-        const int In = I + di[e], Jn = J + dj[e];
-        const uint8_t t = type_at(In, Jn);
-        if (t == kCoarseOutside || t == kCoarseDropped) {
-          if (m.zero_boundary) diag += 1.0;  // Dirichlet 0 (Neumann: left out of the mean)
-          continue;
-        }
-        diag += 1.0;
-        const int q = Jn * Rc + In;
-        if (t == kCoarseKnown) {
-          m.rhs_var.push_back(v);
-          m.rhs_node.push_back(q);
-        } else {
-          triplets.emplace_back(v, var_of[q], -1.0);
-        }
+  num_vars = static_cast<int>(var_node.size());
+  if (num_vars == 0) return;
+  std::vector<Eigen::Triplet<double>> triplets;
+  triplets.reserve(static_cast<size_t>(num_vars) * 5);
+  for (int v = 0; v < num_vars; ++v) {
+    const int n = var_node[v];
+    const int I = n % Rc, J = n / Rc;
+    double diag = 0.0;
+    for (int e = 0; e < 4; ++e) {
+      const int In = I + kDi[e], Jn = J + kDj[e];
+      const uint8_t t = TypeAt(In, Jn);
+      if (t == kCoarseOutside || t == kCoarseDropped) {
+        if (zero_boundary) diag += 1.0;  // Dirichlet 0 (Neumann: left out of the mean)
+        continue;
       }
-      triplets.emplace_back(v, v, diag);
-      for (int dJ = -1; dJ <= 1; ++dJ) {
-        for (int dI = -1; dI <= 1; ++dI) {
-          const int In = I + dI, Jn = J + dJ;
-          if (In >= 0 && Jn >= 0 && In < Rc && Jn < Rc) needed[static_cast<size_t>(Jn) * Rc + In] = 1;
-        }
+      diag += 1.0;
+      const int q = Jn * Rc + In;
+      if (t == kCoarseKnown) {
+        rhs_var.push_back(v);
+        rhs_node.push_back(q);
+      } else {
+        triplets.emplace_back(v, var_of[q], -1.0);
       }
     }
-    Eigen::SparseMatrix<double> A(m.num_vars, m.num_vars);
-    A.setFromTriplets(triplets.begin(), triplets.end());
-    m.solver.compute(A);
-    Require(m.solver.info() == Eigen::Success,
-            fmt::format("PoissonFill: factorising the {}-unknown coarse Laplace system failed", m.num_vars));
+    triplets.emplace_back(v, v, diag);
+    for (int dJ = -1; dJ <= 1; ++dJ) {
+      for (int dI = -1; dI <= 1; ++dI) {
+        const int In = I + dI, Jn = J + dJ;
+        if (In >= 0 && Jn >= 0 && In < Rc && Jn < Rc) (*needed)[static_cast<size_t>(Jn) * Rc + In] = 1;
+      }
+    }
   }
-  // Nodes the bilinear interpolation of any unknown texel reads.
-  for (const Run& run : m.unknown_runs) {
+  Eigen::SparseMatrix<double> A(num_vars, num_vars);
+  A.setFromTriplets(triplets.begin(), triplets.end());
+  solver.compute(A);
+  Require(solver.info() == Eigen::Success,
+          fmt::format("PoissonFill: factorising the {}-unknown coarse Laplace system failed", num_vars));
+}
+
+void PoissonFill::Impl::MarkInterpolatedNodes(std::vector<uint8_t>* needed) const {
+  for (const Run& run : unknown_runs) {
     for (int x = run.x0; x < run.x0 + run.length; ++x) {
       for (int dJ = 0; dJ <= 1; ++dJ)
-        for (int dI = 0; dI <= 1; ++dI) needed[static_cast<size_t>(m.i0[run.y] + dJ) * Rc + m.i0[x] + dI] = 1;
+        for (int dI = 0; dI <= 1; ++dI) (*needed)[static_cast<size_t>(i0[run.y] + dJ) * Rc + i0[x] + dI] = 1;
     }
   }
+}
+
+void PoissonFill::Impl::CollectNeededNodes(std::vector<uint8_t>* needed) {
+  std::vector<uint8_t>& need = *needed;
   for (int n = 0; n < Rc * Rc; ++n) {
-    if (!needed[n]) continue;
-    if (m.node_type[n] == kCoarseKnown) m.known_nodes.push_back(n);
-    if (m.node_type[n] == kCoarseOutside && !m.zero_boundary) {
+    if (!need[n]) continue;
+    if (node_type[n] == kCoarseKnown) known_nodes.push_back(n);
+    if (node_type[n] == kCoarseOutside && !zero_boundary) {
       // Neumann extension: mean of the 4-neighbours in the domain, else of the 8-neighbours.
       const int I = n % Rc, J = n / Rc;
       std::vector<int32_t> src;
       for (int e = 0; e < 4; ++e) {
-        const uint8_t t = type_at(I + di[e], J + dj[e]);
-        if (t == kCoarseKnown || t == kCoarseVar) src.push_back((J + dj[e]) * Rc + I + di[e]);
+        const uint8_t t = TypeAt(I + kDi[e], J + kDj[e]);
+        if (t == kCoarseKnown || t == kCoarseVar) src.push_back((J + kDj[e]) * Rc + I + kDi[e]);
       }
       if (src.empty()) {
         for (int dJ = -1; dJ <= 1; ++dJ)
           for (int dI = -1; dI <= 1; ++dI) {
-            const uint8_t t = type_at(I + dI, J + dJ);
+            const uint8_t t = TypeAt(I + dI, J + dJ);
             if (t == kCoarseKnown || t == kCoarseVar) src.push_back((J + dJ) * Rc + I + dI);
           }
       }
       if (src.empty()) continue;
-      m.ext_node.push_back(n);
-      m.ext_begin.push_back(static_cast<int32_t>(m.ext_source.size()));
-      m.ext_source.insert(m.ext_source.end(), src.begin(), src.end());
+      ext_node.push_back(n);
+      ext_begin.push_back(static_cast<int32_t>(ext_source.size()));
+      ext_source.insert(ext_source.end(), src.begin(), src.end());
       // Known sources must have their values computed too.
       for (int32_t q : src) {
-        if (m.node_type[q] == kCoarseKnown && !needed[q]) {
-          needed[q] = 2;  // added below
+        if (node_type[q] == kCoarseKnown && !need[q]) {
+          need[q] = 2;  // added below
         }
       }
     }
   }
-  m.ext_begin.push_back(static_cast<int32_t>(m.ext_source.size()));
+  ext_begin.push_back(static_cast<int32_t>(ext_source.size()));
   for (int n = 0; n < Rc * Rc; ++n) {
-    if (needed[n] == 2 && m.node_type[n] == kCoarseKnown) m.known_nodes.push_back(n);
+    if (need[n] == 2 && node_type[n] == kCoarseKnown) known_nodes.push_back(n);
   }
-  std::sort(m.known_nodes.begin(), m.known_nodes.end());
-  // Value of a known node: Σ_i w_i f_i over the known texels of its block, with
-  // the least-squares affine fit's weights evaluated at the block centre (exact for
-  // linear fields; the plain mean for a full block). Degenerate configurations
-  // (collinear texels) fall back to the mean.
-  m.known_begin.push_back(0);
-  for (int n : m.known_nodes) {
+  std::sort(known_nodes.begin(), known_nodes.end());
+}
+
+void PoissonFill::Impl::FitKnownBlocks(const cv::Mat& label) {
+  // Value of a known node: Σ_i w_i f_i over the known texels of its block, with the
+  // affine fit's weights evaluated at the block centre (the plain mean for a full block).
+  known_begin.push_back(0);
+  for (int n : known_nodes) {
     const int I = n % Rc, J = n / Rc;
     const double cx = I * s + 0.5 * (s - 1), cy = J * s + 0.5 * (s - 1);
     std::vector<std::pair<int, int>> texels;
     for (int y = J * s; y < (J + 1) * s; ++y)
       for (int x = I * s; x < (I + 1) * s; ++x)
         if (label.ptr<uint8_t>(y)[x] == kKnown) texels.emplace_back(x, y);
-    const int k = static_cast<int>(texels.size());
-    std::vector<double> w(k, 1.0 / k);
-    if (k < s * s) {
-      Eigen::Matrix3d AtA = Eigen::Matrix3d::Zero();
-      for (const auto& [x, y] : texels) {
-        const Eigen::Vector3d a(1.0, x - cx, y - cy);
-        AtA += a * a.transpose();
-      }
-      Eigen::Matrix3d inv;
-      bool invertible = false;
-      double det = 0.0;
-      AtA.computeInverseAndDetWithCheck(inv, det, invertible, 1e-9 * std::pow(AtA.trace(), 3));
-      if (invertible) {
-        const Eigen::Vector3d g = inv.col(0);  // (AᵀA)⁻¹ e1
-        for (int i = 0; i < k; ++i) w[i] = g[0] + g[1] * (texels[i].first - cx) + g[2] * (texels[i].second - cy);
-      }
+    const std::vector<double> w = AffineFitWeights(texels, cx, cy, s);
+    for (size_t i = 0; i < texels.size(); ++i) {
+      known_y.push_back(static_cast<uint16_t>(texels[i].second));
+      known_x.push_back(static_cast<uint16_t>(texels[i].first));
+      known_w.push_back(static_cast<float>(w[i]));
     }
-    for (int i = 0; i < k; ++i) {
-      m.known_y.push_back(static_cast<uint16_t>(texels[i].second));
-      m.known_x.push_back(static_cast<uint16_t>(texels[i].first));
-      m.known_w.push_back(static_cast<float>(w[i]));
-    }
-    m.known_begin.push_back(static_cast<int32_t>(m.known_w.size()));
+    known_begin.push_back(static_cast<int32_t>(known_w.size()));
   }
+}
 
-  // Smoothing band: unknown texels within fill_band_texels of a known texel.
-  if (m.sweeps > 0 && options.fill_band_texels > 0) {
-    // (zero: also near the chart border, where the coarse Dirichlet boundary is off by up to s/2)
-    cv::Mat seeds = zero ? (label != kUnknown) : (label == kKnown);
-    cv::Mat near;
-    const int b = options.fill_band_texels;
-    cv::dilate(seeds, near, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * b + 1, 2 * b + 1)), cv::Point(-1, -1),
-               1, cv::BORDER_CONSTANT, cv::Scalar(255));
-    for (int y = 1; y < R - 1; ++y) {
-      const uint8_t* l = label.ptr<uint8_t>(y);
-      const uint8_t* nr = near.ptr<uint8_t>(y);
-      for (int x = 1; x < R - 1; ++x) {
-        if (l[x] != kUnknown || !nr[x]) continue;
-        float den = 4.0f;
-        if (!m.zero_boundary) {
-          den = static_cast<float>((l[x - 1] != kOutside) + (l[x + 1] != kOutside) +
-                                   (label.ptr<uint8_t>(y - 1)[x] != kOutside) +
-                                   (label.ptr<uint8_t>(y + 1)[x] != kOutside));
-          if (den == 0.0f) continue;
-        }
-        m.band[(x + y) & 1].push_back({static_cast<uint16_t>(x), static_cast<uint16_t>(y), 1.0f / den});
+void PoissonFill::Impl::BuildBand(const cv::Mat& label, int band_texels) {
+  // (zero: also near the chart border, where the coarse Dirichlet boundary is off by up to s/2)
+  cv::Mat seeds = zero_boundary ? (label != kUnknown) : (label == kKnown);
+  cv::Mat near;
+  const int b = band_texels;
+  cv::dilate(seeds, near, cv::getStructuringElement(cv::MORPH_RECT, cv::Size(2 * b + 1, 2 * b + 1)), cv::Point(-1, -1),
+             1, cv::BORDER_CONSTANT, cv::Scalar(255));
+  for (int y = 1; y < R - 1; ++y) {
+    const uint8_t* l = label.ptr<uint8_t>(y);
+    const uint8_t* nr = near.ptr<uint8_t>(y);
+    for (int x = 1; x < R - 1; ++x) {
+      if (l[x] != kUnknown || !nr[x]) continue;
+      float den = 4.0f;
+      if (!zero_boundary) {
+        den = static_cast<float>((l[x - 1] != kOutside) + (l[x + 1] != kOutside) +
+                                 (label.ptr<uint8_t>(y - 1)[x] != kOutside) +
+                                 (label.ptr<uint8_t>(y + 1)[x] != kOutside));
+        if (den == 0.0f) continue;
       }
+      band[(x + y) & 1].push_back({static_cast<uint16_t>(x), static_cast<uint16_t>(y), 1.0f / den});
     }
   }
+}
+
+// Builds what does not change from frame to frame (poisson_fill.h, "Solver"; the
+// paper's pre-factorised Poisson matrix, Sec. 5.2).
+PoissonFill::PoissonFill(const cv::Mat& domain, const cv::Mat& known, const PoissonFillOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  options.Check();
+  RequireMask(domain, "domain");
+  RequireMask(known, "known");
+  Require(known.size() == domain.size(), fmt::format("PoissonFill: the known mask is {}x{}, the domain mask {}x{}",
+                                                     known.cols, known.rows, domain.cols, domain.rows));
+  Impl& m = *impl_;
+  m.SetSizes(domain.rows, options);
+  const cv::Mat label = LabelTexels(domain, known);
+  m.SetRuns(label);
+  // Step 1: the coarse Dirichlet nodes (block fits), unknowns and the factorised system.
+  m.ClassifyBlocks(label);
+  if (!m.zero_boundary) m.DropUnanchoredComponents();
+  m.SetBilinearWeights();
+  std::vector<uint8_t> needed(m.node_type.size(), 0);  // known / outside nodes near a var
+  m.FactoriseCoarseSystem(&needed);
+  m.MarkInterpolatedNodes(&needed);  // step 2 reads them
+  m.CollectNeededNodes(&needed);
+  m.FitKnownBlocks(label);
+  // Step 3: the smoothing band.
+  if (m.sweeps > 0 && options.fill_band_texels > 0) m.BuildBand(label, options.fill_band_texels);
 }
 
 PoissonFill::~PoissonFill() = default;
