@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <fmt/format.h>
 #include <OpenImageIO/imageio.h>
 #include <opencv2/core.hpp>
@@ -13,6 +14,11 @@ namespace crease {
 namespace fs = std::filesystem;
 
 namespace {
+// The most pixels crease decodes from one image: 10^8, more than an 8192² texture or
+// any camera frame (as 4-channel float, 1.6 GB). A header claiming more (a PNG of
+// 100000×100000: 120 GB) is refused before anything is allocated (issue 19).
+constexpr int64_t kMaxImagePixels = 100'000'000;
+
 bool IsFloatFormat(const std::string& ext) {
   return ext == ".exr" || ext == ".hdr" || ext == ".pfm";
 }
@@ -29,6 +35,10 @@ cv::Mat ReadImage(const fs::path& path, bool srgb) {
   if (w <= 0 || h <= 0 || c < 1 || c > 4) {
     throw Error(fmt::format("{}: unsupported image layout {}x{} with {} channels", path.string(),
                             w, h, c));
+  }
+  if (static_cast<int64_t>(w) * h > kMaxImagePixels) {
+    throw Error(fmt::format("{}: the header claims {}x{} pixels, more than the {} that crease reads",
+                            path.string(), w, h, kMaxImagePixels));
   }
   cv::Mat img(h, w, CV_32FC(c));
   if (!in->read_image(0, 0, 0, c, OIIO::TypeDesc::FLOAT, img.data)) {

@@ -83,6 +83,32 @@ TEST(ImageIo, ExrPngRoundTripsSrgbAndErrors) {
   }
   EXPECT_FALSE(fs::exists(dir / "nan.png"));
   EXPECT_THROW(WriteImage(dir / "x.unknownext", codes), Error);
+  // Issue 19: a PNG whose header claims 100000×100000 (OpenCV was asked for 120 GB)
+  // is refused from its header. IHDR: width and height at bytes 16-23, CRC at 29-32.
+  {
+    std::ifstream in(dir / "codes.png", std::ios::binary);
+    std::string png(std::istreambuf_iterator<char>(in), {});
+    ASSERT_EQ(png.substr(12, 4), "IHDR");
+    auto put_u32 = [&](size_t at, uint32_t v) {
+      for (int i = 0; i < 4; ++i) png[at + i] = static_cast<char>(v >> (24 - 8 * i) & 0xff);
+    };
+    put_u32(16, 100000);
+    put_u32(20, 100000);
+    uint32_t crc = 0xffffffffu;  // CRC-32 of the chunk type and data, as PNG readers check it
+    for (size_t i = 12; i < 29; ++i) {
+      crc ^= static_cast<unsigned char>(png[i]);
+      for (int k = 0; k < 8; ++k) crc = crc >> 1 ^ (0xedb88320u & (0u - (crc & 1u)));
+    }
+    put_u32(29, ~crc);
+    std::ofstream(dir / "huge.png", std::ios::binary) << png;
+    try {
+      ReadImage(dir / "huge.png");
+      FAIL();
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("huge.png: the header claims 100000x100000 pixels"), std::string::npos)
+          << e.what();
+    }
+  }
   // No temporary files are left behind.
   for (const auto& e : fs::directory_iterator(dir)) {
     EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
