@@ -35,6 +35,7 @@
 #include "pipeline/training/wrinkle_map.h"
 #include "eval/rig_correspondence.h"
 #include "synth/actor.h"
+#include "synth/dataset.h"
 
 namespace crease {
 
@@ -612,9 +613,7 @@ struct CaptureEvalContext {
 
   // The dataset's image of frame `index`.
   fs::path FramePath(int index) const {
-    std::string pattern = "frames/{frame:06d}.png";
-    if (info.contains("files") && info["files"].contains("frame")) pattern = info["files"]["frame"].get<std::string>();
-    return dataset / fmt::format(fmt::runtime(pattern), fmt::arg("frame", index));
+    return dataset / fmt::format(fmt::runtime(frame_pattern), fmt::arg("frame", index));
   }
   // The fraction of the face-chart vertices visible in the ground truth (`vertex_visible`: #V).
   double VisibleFraction(const std::vector<char>& vertex_visible) const {
@@ -626,6 +625,7 @@ struct CaptureEvalContext {
   fs::path capture, dataset;
   const CaptureEvalOptions& options;
   json cap, info;          // capture.json, dataset.json
+  std::string frame_pattern;  // dataset.json's files.frame, checked (DatasetFramePattern)
   FaceRig truth_rig, rig;  // the dataset's rig; the compatible rig capture used
   // A capture with another rig than the dataset's is measured through a surface
   // correspondence; D^t, in the other rig's UV layout, is then not compared.
@@ -686,6 +686,7 @@ void CaptureEvalContext::ReadInputs() {
           fmt::format("{}: missing; is {} a `crease synth sequence` dataset?", dataset_json.string(), dataset.string()));
   cap = ReadJsonFile(capture_json);
   info = ReadJsonFile(dataset_json);
+  frame_pattern = DatasetFramePattern(info, dataset_json);
   truth_rig = ReadRig(dataset / "rig.crig");
   rig = ReadRig(capture / "rig.crig");
   corr = CorrespondRigs(rig, truth_rig);

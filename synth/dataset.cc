@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <numbers>
@@ -322,6 +323,50 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
   });
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return report;
+}
+
+namespace {
+// The widest a frame pattern may pad {frame}: frame numbers have at most 10 digits.
+constexpr int kMaxFrameFieldWidth = 32;
+
+// Checks the replacement fields of a files.frame pattern: {frame} or {frame:SPEC},
+// no number in SPEC (the width) above kMaxFrameFieldWidth. `where` names the key.
+void CheckFrameFields(const std::string& pattern, const std::string& where) {
+  for (size_t open = pattern.find('{'); open != std::string::npos; open = pattern.find('{', open)) {
+    if (pattern.compare(open, 2, "{{") == 0) {  // an escaped brace
+      open += 2;
+      continue;
+    }
+    const size_t close = pattern.find('}', open);
+    Require(close != std::string::npos, fmt::format("{} = \"{}\": a '{{' is not closed", where, pattern));
+    const std::string field = pattern.substr(open + 1, close - open - 1);
+    const size_t colon = field.find(':');
+    Require(field.substr(0, colon) == "frame",
+            fmt::format("{} = \"{}\": the only field is {{frame}}, not {{{}}}", where, pattern, field));
+    int number = 0;
+    for (char c : colon == std::string::npos ? std::string() : field.substr(colon + 1)) {
+      number = std::isdigit(static_cast<unsigned char>(c)) ? number * 10 + (c - '0') : 0;
+      Require(number <= kMaxFrameFieldWidth, fmt::format("{} = \"{}\": {{{}}} pads wider than {} characters",
+                                                         where, pattern, field, kMaxFrameFieldWidth));
+    }
+    open = close + 1;
+  }
+}
+}  // namespace
+
+std::string DatasetFramePattern(const json& info, const fs::path& dataset_json) {
+  if (!info.contains("files") || !info.at("files").contains("frame")) return "frames/{frame:06d}.png";
+  const std::string where = fmt::format("{}: files.frame", dataset_json.string());
+  const json& value = info.at("files").at("frame");
+  Require(value.is_string(), fmt::format("{} must be a string such as \"frames/{{frame:06d}}.png\"", where));
+  const std::string pattern = value.get<std::string>();
+  CheckFrameFields(pattern, where);
+  try {
+    (void)fmt::format(fmt::runtime(pattern), fmt::arg("frame", 0));
+  } catch (const fmt::format_error& e) {
+    throw Error(fmt::format("{} = \"{}\" is not a valid pattern: {}", where, pattern, e.what()));
+  }
+  return pattern;
 }
 
 TriMesh RebuildDatasetFrameMesh(const fs::path& dataset, int frame) {
