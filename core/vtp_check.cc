@@ -17,10 +17,13 @@ namespace crease {
 namespace {
 
 constexpr size_t npos = std::string_view::npos;
-// deflate's largest compression ratio (1032:1, zlib's technical details): zlib data
-// cannot inflate to more than this times its own size, and no array, whatever its
-// encoding (ascii, base64, zlib), holds more than this many bytes per byte of file.
+// deflate's largest compression ratio (1032:1, zlib's technical details): zlib (and
+// LZ4, at most 255:1) data cannot inflate to more than this times its own size, and
+// no inline or base64 array holds more than this many bytes per byte of file.
 constexpr uint64_t kMaxInflation = 1032;
+// LZMA's ratio has no such tight bound (xz packs zeros about 7000:1); this one is
+// generous and still keeps a lying block header from asking for gigabytes.
+constexpr uint64_t kMaxLzmaInflation = 1 << 16;
 // The largest element count or number of components: VTK and crease index meshes
 // with 32-bit ints.
 constexpr uint64_t kMaxCount = std::numeric_limits<int32_t>::max();
@@ -89,7 +92,7 @@ struct ArrayClaim {
   std::string name;
   std::string parent;        // the enclosing element: "Points", "PointData", "Polys", ...
   int piece = 0;             // index of the enclosing Piece
-  uint64_t type_size = 1;    // bytes per value
+  uint64_t type_size = 1;    // bytes per value (0: String, Bit; not checked)
   uint64_t bytes = 0;        // at least this many decoded bytes (tuples × components × type size)
   bool appended = false;     // format="appended": the data is at `offset` in the appended data
   bool ascii = false;        // format="ascii"
@@ -103,6 +106,7 @@ struct VtpLayout {
   std::vector<ArrayClaim> arrays;
   uint64_t header_width = 4;   // header_type UInt32 or UInt64
   bool compressed = false;
+  std::string compressor;      // "vtkZLibDataCompressor", "vtkLZ4DataCompressor", "vtkLZMADataCompressor"
   bool big_endian = false;
   bool raw = true;             // AppendedData encoding="raw" (else base64)
   size_t appended = npos;      // offset of the first appended byte, just after '_'
@@ -124,7 +128,7 @@ uint64_t TypeSize(const std::string& type) {
       {"Int8", 1},  {"UInt8", 1},  {"Int16", 2},   {"UInt16", 2},  {"Int32", 4},
       {"UInt32", 4}, {"Int64", 8}, {"UInt64", 8}, {"Float32", 4}, {"Float64", 8}};
   const auto it = sizes.find(type);
-  return it == sizes.end() ? 1 : it->second;  // String, Bit: at least a byte each
+  return it == sizes.end() ? 0 : it->second;  // String, Bit: not checked
 }
 
 // The tuples VTK allocates for a DataArray inside element `parent` (0 when VTK
@@ -189,7 +193,9 @@ VtpLayout ReadLayout(std::string_view xml, const std::string& file) {
     if (tag->name == "VTKFile") {
       const auto header = tag->attributes.find("header_type");
       layout.header_width = header != tag->attributes.end() && header->second == "UInt64" ? 8 : 4;
-      layout.compressed = tag->attributes.count("compressor") > 0;
+      const auto compressor = tag->attributes.find("compressor");
+      layout.compressed = compressor != tag->attributes.end() && !compressor->second.empty();
+      if (layout.compressed) layout.compressor = compressor->second;
       const auto order = tag->attributes.find("byte_order");
       layout.big_endian = order != tag->attributes.end() && order->second == "BigEndian";
     } else if (tag->name == "Piece") {
@@ -268,7 +274,9 @@ HeldData AppendedData(std::string_view bytes, size_t at, const VtpLayout& layout
   }
   held.last_decoded_size = last_size > 0 ? last_size : block_size;
   held.bytes = SaturatingProduct(blocks - 1, block_size) + held.last_decoded_size;
-  if (held.bytes / kMaxInflation > compressed) {
+  const uint64_t max_inflation =
+      layout.compressor == "vtkLZMADataCompressor" ? kMaxLzmaInflation : kMaxInflation;
+  if (held.bytes / max_inflation > compressed) {
     Malformed(file, fmt::format("array '{}': {} compressed bytes cannot hold the {} bytes its block header "
                                 "claims", array.name, compressed, held.bytes));
   }
@@ -303,7 +311,11 @@ std::optional<uint64_t> LastValue(std::string_view bytes, const VtpLayout& layou
     if (text.empty() || ec != std::errc() || end != text.data() + text.size()) return std::nullopt;
     return value;
   }
-  if (!held.exact || held.last_decoded_size < array.type_size) return std::nullopt;
+  const bool zlib = layout.compressor == "vtkZLibDataCompressor";
+  if (!held.exact || (layout.compressed && !zlib) || array.type_size == 0 ||
+      held.last_decoded_size < array.type_size) {
+    return std::nullopt;  // other compressors: VTK's own checks
+  }
   std::string block(held.last_decoded_size, '\0');
   if (layout.compressed) {
     uLongf size = block.size();
@@ -332,6 +344,7 @@ void CheckOffsets(std::string_view bytes, const VtpLayout& layout, const std::ve
         continue;
       }
       const std::optional<uint64_t> last = LastValue(bytes, layout, arrays[i], held[i], file);
+      if (arrays[j].type_size == 0) continue;
       const uint64_t values = held[j].bytes / arrays[j].type_size;
       if (last && *last > values) {
         Malformed(file, fmt::format("{} offsets end at {}, but the connectivity holds {} values",

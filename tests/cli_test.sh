@@ -134,6 +134,46 @@ bad "capture unknown option" "unknown option 'ferns'" "$crease" capture -i "$tmp
 bad "eval not a capture" "capture.json" "$crease" eval --capture "$tmp/seq" --dataset "$tmp/seq"
 bad "eval not a dataset" "dataset.json" "$crease" eval --capture "$tmp/cap" --dataset "$tmp/scans"
 
+# Issue 19: files crease writes, edited to lie about their sizes, devices and an alias
+# bomb give a clear error naming the file, not a crash, a hang or gigabytes.
+python3 - "$tmp" <<'PY'
+import json, re, struct, sys, zlib
+d = sys.argv[1]
+def put(name, data): open(f"{d}/{name}", "wb").write(data)
+vtp = open(f"{d}/e.vtp", "rb").read()  # binary: zlib blocks, UInt32 block headers
+at = vtp.index(b"_", vtp.index(b"<AppendedData")) + 1  # the first array's block header
+def word(k, v): return vtp[:at + 4 * k] + struct.pack("<I", v) + vtp[at + 4 * k + 4:]
+put("neg.vtp", re.sub(rb'NumberOfPoints="\d+"', b'NumberOfPoints="-1"', vtp))
+put("polys.vtp", re.sub(rb'NumberOfPolys="\d+"', b'NumberOfPolys="2000000000"', vtp))
+put("blocks0.vtp", word(0, 0))
+put("blocksize0.vtp", word(1, 0))
+put("blocksff.vtp", word(0, 0xFFFFFFFF))
+png = bytearray(open(f"{d}/regions.png", "rb").read())
+png[16:24] = struct.pack(">II", 100000, 100000)
+png[29:33] = struct.pack(">I", zlib.crc32(bytes(png[12:29])))
+put("huge.png", bytes(png))
+yaml = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
+    f"{c}: &{c} [{', '.join(['*' + chr(ord(c) - 1)] * 9)}]\n" for c in "bcdefghi")
+put("bomb.yaml", yaml.encode())
+ds = json.load(open(f"{d}/seq/dataset.json"))
+ds["files"]["frame"] = "frames/{frame:999999999d}.png"
+import os; os.makedirs(f"{d}/seqpat", exist_ok=True)
+put("seqpat/dataset.json", json.dumps(ds).encode())
+PY
+bad "vtp NumberOfPoints=-1" 'neg.vtp: not a readable VTK XML PolyData file: Piece NumberOfPoints="-1"' "$crease" mesh info "$tmp/neg.vtp"
+bad "vtp NumberOfPolys 2e9" "polys.vtp: not a readable VTK XML PolyData file: array 'offsets' holds" "$crease" mesh convert "$tmp/polys.vtp" "$tmp/x.ply"
+bad "vtp 0 blocks" "blocks0.vtp: not a readable VTK XML PolyData file" "$crease" mesh info "$tmp/blocks0.vtp"
+bad "vtp block size 0" "bad compressed block sizes" "$crease" mesh info "$tmp/blocksize0.vtp"
+bad "vtp 2^32-1 blocks" "past the end of the file" "$crease" mesh convert "$tmp/blocksff.vtp" "$tmp/x.ply"
+bad "experiment alias bomb" "bomb.yaml: the YAML expands to more than" "$crease" experiment run "$tmp/bomb.yaml" --dry-run
+bad "render-scan albedo device" "/dev/zero: is not a regular file" "$crease" synth render-scan --mesh "$tmp/e.obj" --albedo /dev/zero --units mm --size 160x120 --samples 1 -o "$tmp/x.png"
+bad "render-scan displacement device" "/dev/zero: is not a regular file" "$crease" synth render-scan --mesh "$tmp/e.obj" --albedo "$tmp/regions.png" --displacement /dev/zero --units mm --size 160x120 --samples 1 -o "$tmp/x.png"
+bad "rig info device" "/dev/zero: is not a regular file" "$crease" rig info /dev/zero
+bad "model info device" "/dev/zero: is not a regular file" "$crease" model info /dev/zero
+bad "PNG claiming 100000x100000" "huge.png: the header claims 100000x100000 pixels" "$crease" synth render-scan --mesh "$tmp/e.obj" --albedo "$tmp/huge.png" --units mm --size 160x120 --samples 1 -o "$tmp/x.png"
+bad "eval frame pattern width" "seqpat/dataset.json: files.frame" "$crease" eval --capture "$tmp/cap" --dataset "$tmp/seqpat"
+[ ! -e "$tmp/x.png" ] && [ ! -e "$tmp/x.ply" ] || { echo "FAIL: output written despite an error"; fails=$((fails+1)); }
+
 bad "missing mesh" "nope.ply: file does not exist" "$crease" mesh info "$tmp/nope.ply"
 printf 'ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n' > "$tmp/badidx.ply"
 bad "index out of range" "badidx.ply" "$crease" mesh info "$tmp/badidx.ply"
