@@ -39,7 +39,7 @@
 namespace crease {
 
 // A light rig by name (a preset of synth/lights.h: front, raking-above, raking-side,
-// studio, studio-env, overcast, window), "directional:AZ:EL[:AMBIENT]" (one
+// studio, ceiling, studio-env, overcast, window), "directional:AZ:EL[:AMBIENT]" (one
 // camera-attached directional light at azimuth/elevation in degrees, DirectionalRig,
 // with ambient occlusion AMBIENT, default 0.05: for sweeps of the light direction) or
 // a lat-long environment map file (.exr, .hdr: linear radiance, importance sampled).
