@@ -93,6 +93,48 @@ struct Pending {
   Vec3f specular;
 };
 
+// What one Render call resolves once: the camera, the lights in the head frame, the
+// sampling and the tiling.
+struct RenderContext {
+  const RenderOptions* options = nullptr;
+  uint64_t frame_seed = 0;  // per-pixel generators derive from it
+  int width = 0, height = 0;
+  float fx = 0, fy = 0, cx = 0, cy = 0;
+  Mat3f cam_from_head_r, head_from_cam;
+  Vec3f eye;  // camera centre, head frame
+  std::vector<ResolvedLight> lights;
+  int background_env = -1;  // the light rays that miss see (environment_background), or −1
+  int n_axis = 1, num_samples = 1;
+  float inv_samples = 1.0f;
+  bool sss = false;         // subsurface blur
+  bool stochastic = false;  // per-pixel generators needed (jitter or sampled lights)
+  Vec3f background;
+  float eps = 0.0f;  // shadow-ray offset, mm
+  int tile = 16, tiles_x = 0, tiles_y = 0;
+};
+
+// Subsurface: diffuse irradiance, albedo and the rest kept apart, blurred after.
+struct SubsurfaceBuffers {
+  cv::Mat irradiance, albedo, rest;  // CV_32FC3
+  cv::Mat depth;                     // CV_32FC1 mean hit depth, mm; 0 where no hit
+};
+
+// One thread's buffers for a tile's pixels, in packet order; reused across tiles.
+struct TileScratch {
+  std::vector<int> px, py;
+  std::vector<Rng> rngs;                               // per pixel, when stochastic
+  std::vector<Ray> rays, coherent_rays, sampled_rays;  // primary; shadow rays (directional lights, the rest)
+  std::vector<Hit> hits;
+  std::vector<uint8_t> occluded;
+  std::vector<Pending> coherent_pending, sampled_pending;
+  std::vector<Surface> surf;
+  std::vector<uint8_t> has_hit;
+  std::vector<Vec3f> color, irr, spec;               // sum over samples; this sample's diffuse and the rest
+  std::vector<Vec3f> albedo_sum, irr_sum, rest_sum;  // subsurface sums
+  std::vector<float> hit_count, depth_sum;
+  int64_t primary_rays = 0, shadow_rays = 0;  // this tile's
+};
+
 }  // namespace
 
 // ---- Options ------------------------------------------------------------------------
@@ -234,6 +276,24 @@ struct Renderer::Impl {
   }
 
   RenderResult Render(const Camera& camera, const LightRig& rig, const RenderOptions& options, Rng& rng) const;
+
+ private:
+  // The steps of Render that need the mesh (the rest are free functions above Render).
+  // One prepared tile: each sample's primary rays, shading, light samples and shadow
+  // rays, then the passes and the pixel means.
+  void RenderTile(const RenderContext& ctx, TileScratch* s, RenderResult* out, SubsurfaceBuffers* sss) const;
+  // Barycentric interpolation of per-vertex `a` (or the UVs) at a hit.
+  Vec3f Interpolate(const Hit& h, const std::vector<Vec3f>& a) const;
+  Eigen::Vector2f InterpolateUv(const Hit& h) const;
+  // Shading normal n facing the viewer side of the geometric normal ng (ray direction d).
+  void Orient(const Hit& h, const Vec3f& d, Vec3f* n, Vec3f* ng) const;
+  // Depth, normal, UV, triangle and part of the tile's hits.
+  void WritePasses(const RenderContext& ctx, const TileScratch& s, RenderResult* out) const;
+  // Surfaces and misses: each hit's point, normals and BRDF; a miss sees the background.
+  void ShadeHits(const RenderContext& ctx, TileScratch* s) const;
+  // Shadow rays of the pending light samples; the unoccluded ones add their light.
+  void TraceShadows(const std::vector<Ray>& rays, const std::vector<Pending>& pending, RayCoherence coherence,
+                    TileScratch* s) const;
 };
 
 Renderer::Renderer(const TriMesh& mesh, SceneMaterials materials, const RendererOptions& options,
@@ -298,27 +358,17 @@ RenderResult Renderer::Render(const Camera& camera, const LightRig& rig, const R
   return impl_->Render(camera, rig, options, rng);
 }
 
-RenderResult Renderer::Impl::Render(const Camera& camera, const LightRig& rig, const RenderOptions& options,
-                                    Rng& rng) const {
-  const auto start = std::chrono::steady_clock::now();
-  options.Check();
-  camera.intrinsics.Validate("Render camera");
-  ValidateLightRig(rig);
-  const uint64_t frame_seed = rng.NextU64();
+// ---- Render ---------------------------------------------------------------------------
 
-  const int width = camera.intrinsics.width, height = camera.intrinsics.height;
-  const float fx = static_cast<float>(camera.intrinsics.fx), fy = static_cast<float>(camera.intrinsics.fy);
-  const float cx = static_cast<float>(camera.intrinsics.cx), cy = static_cast<float>(camera.intrinsics.cy);
-  const Mat3f cam_from_head_r = camera.cam_from_head.rotation.toRotationMatrix().cast<float>();
-  const Mat3f head_from_cam = cam_from_head_r.transpose();
-  const Vec3f eye = camera.CentreInHead().cast<float>();
-  // Camera-attached rigs: camera axes, origin at the head origin (synth/lights.h).
+namespace {
+
+// The lights of `rig` in the head frame. Camera-attached rigs: camera axes, origin at
+// the head origin (synth/lights.h).
+std::vector<ResolvedLight> ResolveLights(const LightRig& rig, const Mat3f& head_from_cam) {
   const Mat3f head_from_rig = rig.attached_to_camera ? head_from_cam : Mat3f::Identity();
   Mat3f rig_from_env = Mat3f::Identity();
   if (rig.attached_to_camera) rig_from_env.diagonal() << 1.0f, -1.0f, -1.0f;
-
   std::vector<ResolvedLight> lights;
-  const ResolvedLight* background_env = nullptr;
   for (const Light& light : rig.lights) {
     ResolvedLight r;
     if (const auto* d = std::get_if<DirectionalLight>(&light)) {
@@ -348,415 +398,513 @@ RenderResult Renderer::Impl::Render(const Camera& camera, const LightRig& rig, c
     }
     lights.push_back(r);
   }
-  for (const ResolvedLight& l : lights) {
-    if (l.kind == LightKind::kEnvironment) {
-      background_env = &l;
+  return lights;
+}
+
+RenderContext MakeContext(const Camera& camera, const LightRig& rig, const RenderOptions& options,
+                          uint64_t frame_seed) {
+  RenderContext c;
+  c.options = &options;
+  c.frame_seed = frame_seed;
+  c.width = camera.intrinsics.width;
+  c.height = camera.intrinsics.height;
+  c.fx = static_cast<float>(camera.intrinsics.fx);
+  c.fy = static_cast<float>(camera.intrinsics.fy);
+  c.cx = static_cast<float>(camera.intrinsics.cx);
+  c.cy = static_cast<float>(camera.intrinsics.cy);
+  c.cam_from_head_r = camera.cam_from_head.rotation.toRotationMatrix().cast<float>();
+  c.head_from_cam = c.cam_from_head_r.transpose();
+  c.eye = camera.CentreInHead().cast<float>();
+  c.lights = ResolveLights(rig, c.head_from_cam);
+  for (size_t k = 0; k < c.lights.size() && options.environment_background; ++k) {
+    if (c.lights[k].kind == LightKind::kEnvironment) {
+      c.background_env = static_cast<int>(k);
       break;
     }
   }
-  if (!options.environment_background) background_env = nullptr;
+  c.n_axis = options.samples_per_axis;
+  c.num_samples = c.n_axis * c.n_axis;
+  c.inv_samples = 1.0f / static_cast<float>(c.num_samples);
+  c.sss = options.subsurface_mm > 0.0;
+  c.stochastic = c.n_axis > 1;
+  for (const ResolvedLight& l : c.lights) c.stochastic = c.stochastic || l.kind != LightKind::kDirectional;
+  c.background = ToVec3f(options.background);
+  c.eps = static_cast<float>(options.ray_epsilon_mm);
+  c.tile = options.tile_size;
+  c.tiles_x = (c.width + c.tile - 1) / c.tile;
+  c.tiles_y = (c.height + c.tile - 1) / c.tile;
+  return c;
+}
 
-  const int n_axis = options.samples_per_axis;
-  const int num_samples = n_axis * n_axis;
-  const float inv_samples = 1.0f / static_cast<float>(num_samples);
-  const bool sss = options.subsurface_mm > 0.0;
-  // Per-pixel generators are needed for jitter and for sampled lights only.
-  bool stochastic = n_axis > 1;
-  for (const ResolvedLight& l : lights) stochastic = stochastic || l.kind != LightKind::kDirectional;
-  const Vec3f background = ToVec3f(options.background);
-  const float eps = static_cast<float>(options.ray_epsilon_mm);
-
+RenderResult AllocateResult(int width, int height, bool passes) {
   RenderResult out;
   out.image = cv::Mat(height, width, CV_32FC3, cv::Scalar::all(0));
   out.alpha = cv::Mat(height, width, CV_32FC1, cv::Scalar::all(0));
-  if (options.passes) {
+  if (passes) {
     out.depth = cv::Mat(height, width, CV_32FC1, cv::Scalar::all(0));
     out.normal = cv::Mat(height, width, CV_32FC3, cv::Scalar::all(0));
     out.uv = cv::Mat(height, width, CV_32FC2, cv::Scalar::all(0));
     out.triangle_id = cv::Mat(height, width, CV_32SC1, cv::Scalar::all(-1));
     out.part_id = cv::Mat(height, width, CV_32SC1, cv::Scalar::all(-1));
   }
-  // Subsurface: diffuse irradiance, albedo and the rest kept apart, blurred after.
-  cv::Mat sss_irr, sss_albedo, sss_rest, sss_depth;
-  if (sss) {
-    sss_irr = cv::Mat(height, width, CV_32FC3, cv::Scalar::all(0));
-    sss_albedo = cv::Mat(height, width, CV_32FC3, cv::Scalar::all(0));
-    sss_rest = cv::Mat(height, width, CV_32FC3, cv::Scalar::all(0));
-    sss_depth = cv::Mat(height, width, CV_32FC1, cv::Scalar::all(0));
+  return out;
+}
+
+SubsurfaceBuffers AllocateSubsurface(int width, int height) {
+  SubsurfaceBuffers b;
+  b.irradiance = cv::Mat(height, width, CV_32FC3, cv::Scalar::all(0));
+  b.albedo = cv::Mat(height, width, CV_32FC3, cv::Scalar::all(0));
+  b.rest = cv::Mat(height, width, CV_32FC3, cv::Scalar::all(0));
+  b.depth = cv::Mat(height, width, CV_32FC1, cv::Scalar::all(0));
+  return b;
+}
+
+// Tile t's pixels and per-pixel generators, and the tile's sums cleared; false when
+// the tile holds no pixel.
+bool PrepareTile(const RenderContext& ctx, int t, TileScratch* s) {
+  const int x0 = (t % ctx.tiles_x) * ctx.tile, y0 = (t / ctx.tiles_x) * ctx.tile;
+  // Pixels in packet order: 4×4 blocks, row-major inside each block.
+  s->px.clear();
+  s->py.clear();
+  for (int by = 0; by < ctx.tile; by += kPacketSide) {
+    for (int bx = 0; bx < ctx.tile; bx += kPacketSide) {
+      for (int iy = 0; iy < kPacketSide; ++iy) {
+        for (int ix = 0; ix < kPacketSide; ++ix) {
+          const int x = x0 + bx + ix, y = y0 + by + iy;
+          if (x < ctx.width && y < ctx.height) {
+            s->px.push_back(x);
+            s->py.push_back(y);
+          }
+        }
+      }
+    }
   }
+  const size_t np = s->px.size();
+  if (np == 0) return false;
+  s->rngs.clear();
+  for (size_t i = 0; i < (ctx.stochastic ? np : 0); ++i) {
+    const uint64_t pixel =
+        static_cast<uint64_t>(s->py[i]) * static_cast<uint64_t>(ctx.width) + static_cast<uint64_t>(s->px[i]);
+    s->rngs.emplace_back(ctx.frame_seed ^ (0x9E3779B97F4A7C15ULL * (pixel + 1)));
+  }
+  s->rays.resize(np);
+  s->surf.resize(np);
+  s->has_hit.assign(np, 0);
+  s->color.assign(np, Vec3f::Zero());
+  s->hit_count.assign(np, 0.0f);
+  if (ctx.sss) {
+    s->albedo_sum.assign(np, Vec3f::Zero());
+    s->irr_sum.assign(np, Vec3f::Zero());
+    s->rest_sum.assign(np, Vec3f::Zero());
+    s->depth_sum.assign(np, 0.0f);
+  }
+  s->primary_rays = 0;
+  s->shadow_rays = 0;
+  return true;
+}
 
-  const int tile = options.tile_size;
-  const int tiles_x = (width + tile - 1) / tile, tiles_y = (height + tile - 1) / tile;
-  std::atomic<int64_t> primary_rays{0}, shadow_rays{0};
+// The primary ray through pixel i of the tile at offset (ox, oy) from its centre.
+void PrimaryRay(const RenderContext& ctx, size_t i, float ox, float oy, TileScratch* s) {
+  const Vec3f d_cam((static_cast<float>(s->px[i]) + ox - ctx.cx) / ctx.fx,
+                    (static_cast<float>(s->py[i]) + oy - ctx.cy) / ctx.fy, 1.0f);
+  Ray& r = s->rays[i];
+  r.origin = ctx.eye;
+  r.direction = ctx.head_from_cam * d_cam;  // unnormalised: t is the depth z in mm
+  r.tnear = 0.0f;
+  r.tfar = std::numeric_limits<float>::infinity();
+}
 
-  tbb::parallel_for(tbb::blocked_range<int>(0, tiles_x * tiles_y, 1), [&](const tbb::blocked_range<int>& range) {
-    std::vector<int> px, py;
-    std::vector<Rng> rngs;
-    std::vector<Ray> rays, coherent_rays, sampled_rays;
-    std::vector<Hit> hits;
-    std::vector<uint8_t> occluded;
-    std::vector<Pending> coherent_pending, sampled_pending;
-    std::vector<Surface> surf;
-    std::vector<uint8_t> has_hit;
-    std::vector<Vec3f> color, irr, spec, albedo_sum, irr_sum, rest_sum;
-    std::vector<float> hit_count, depth_sum;
-    for (int t = range.begin(); t != range.end(); ++t) {
-      const int x0 = (t % tiles_x) * tile, y0 = (t / tiles_x) * tile;
-      // Pixels in packet order: 4×4 blocks, row-major inside each block.
-      px.clear();
-      py.clear();
-      for (int by = 0; by < tile; by += kPacketSide) {
-        for (int bx = 0; bx < tile; bx += kPacketSide) {
-          for (int iy = 0; iy < kPacketSide; ++iy) {
-            for (int ix = 0; ix < kPacketSide; ++ix) {
-              const int x = x0 + bx + ix, y = y0 + by + iy;
-              if (x < width && y < height) {
-                px.push_back(x);
-                py.push_back(y);
-              }
-            }
-          }
-        }
+// The primary rays of sample `sample` of every pixel (stratified and jittered when N > 1).
+void PrimaryRays(const RenderContext& ctx, int sample, TileScratch* s) {
+  const int sx = sample % ctx.n_axis, sy = sample / ctx.n_axis;
+  for (size_t i = 0; i < s->px.size(); ++i) {
+    float ox = 0.0f, oy = 0.0f;
+    if (ctx.n_axis > 1) {
+      ox = (static_cast<float>(sx) + static_cast<float>(s->rngs[i].Uniform())) / ctx.n_axis - 0.5f;
+      oy = (static_cast<float>(sy) + static_cast<float>(s->rngs[i].Uniform())) / ctx.n_axis - 0.5f;
+    }
+    PrimaryRay(ctx, i, ox, oy, s);
+  }
+}
+
+// A light sample at pixel i: radiance·cos from `dir`, weighted by the BRDF; added now
+// without shadows, else pending on a shadow ray to `tfar` (coherent or sampled batch).
+void Emit(const RenderContext& ctx, bool coherent, size_t i, const Vec3f& dir, float tfar, const Vec3f& radiance_cos,
+          TileScratch* s) {
+  const Surface& sf = s->surf[i];
+  const Pending p{static_cast<int>(i), radiance_cos * sf.brdf.diffuse_weight(), radiance_cos * sf.brdf.Specular(dir)};
+  if (!ctx.options->shadows) {
+    s->irr[i] += p.irradiance;
+    s->spec[i] += p.specular;
+    return;
+  }
+  const Ray r{sf.p + ctx.eps * sf.ng, dir, 0.0f, tfar};
+  (coherent ? s->coherent_rays : s->sampled_rays).push_back(r);
+  (coherent ? s->coherent_pending : s->sampled_pending).push_back(p);
+}
+
+void SampleDirectional(const RenderContext& ctx, const ResolvedLight& light, TileScratch* s) {
+  const float inf = std::numeric_limits<float>::infinity();
+  for (size_t i = 0; i < s->px.size(); ++i) {
+    if (!s->has_hit[i]) continue;
+    const float c = s->surf[i].n.dot(light.direction);
+    if (c <= 0.0f || s->surf[i].ng.dot(light.direction) <= 0.0f) continue;
+    Emit(ctx, true, i, light.direction, inf, light.color * c, s);
+  }
+}
+
+// Uniform sampling of the cone the sphere subtends, stratified in cos θ.
+void SampleSphere(const RenderContext& ctx, const ResolvedLight& light, TileScratch* s) {
+  for (int k = 0; k < light.samples; ++k) {
+    for (size_t i = 0; i < s->px.size(); ++i) {
+      if (!s->has_hit[i]) continue;
+      const Surface& sf = s->surf[i];
+      const Vec3f wc = light.centre - sf.p;
+      const float dist = wc.norm();
+      const float xi1 = (static_cast<float>(k) + static_cast<float>(s->rngs[i].Uniform())) / light.samples;
+      const float xi2 = static_cast<float>(s->rngs[i].Uniform());
+      if (dist <= light.radius * 1.0001f) continue;
+      const float sin2 = light.radius * light.radius / (dist * dist);
+      const float cos_max = std::sqrt(std::max(0.0f, 1.0f - sin2));
+      const float one_minus = sin2 / (1.0f + cos_max);
+      const float cos_t = 1.0f - xi1 * one_minus;
+      const float sin_t = std::sqrt(std::max(0.0f, 1.0f - cos_t * cos_t));
+      const float phi = 2.0f * kPi * xi2;
+      const Vec3f w = wc / dist;
+      Vec3f u, v;
+      Basis(w, &u, &v);
+      const Vec3f dir = (sin_t * std::cos(phi) * u + sin_t * std::sin(phi) * v + cos_t * w).normalized();
+      const float c = sf.n.dot(dir);
+      if (c <= 0.0f || sf.ng.dot(dir) <= 0.0f) continue;
+      const float t_hit =
+          dist * cos_t - std::sqrt(std::max(0.0f, light.radius * light.radius - dist * dist * sin_t * sin_t));
+      const float inv_pdf = 2.0f * kPi * one_minus;
+      Emit(ctx, false, i, dir, t_hit * (1.0f - 1e-4f), light.color * (c * inv_pdf / light.samples), s);
+    }
+  }
+}
+
+// Multiple importance sampling (balance heuristic, Veach 1997): n_l samples from the
+// map's luminance distribution and n_b cosine-weighted samples; every sample is
+// weighted by 1 / (n_l·pdf_l + n_b·pdf_b).
+void SampleEnvironment(const RenderContext& ctx, const ResolvedLight& light, TileScratch* s) {
+  const float inf = std::numeric_limits<float>::infinity();
+  const int n_l = (light.samples + 1) / 2, n_b = light.samples - n_l;
+  const Mat3f env_from_head = light.head_from_env.transpose();
+  for (int k = 0; k < light.samples; ++k) {
+    const bool from_map = k < n_l;
+    const int stratum = from_map ? k : k - n_l, strata = from_map ? n_l : n_b;
+    for (size_t i = 0; i < s->px.size(); ++i) {
+      if (!s->has_hit[i]) continue;
+      const Surface& sf = s->surf[i];
+      const double u1 = (stratum + s->rngs[i].Uniform()) / strata;
+      const double u2 = s->rngs[i].Uniform();
+      Vec3f d_env, dir;
+      float pdf_l = 0.0f;
+      if (from_map) {
+        d_env = light.map->Sample(u1, u2, &pdf_l);
+        dir = light.head_from_env * d_env;
+      } else {
+        Vec3f u, v;
+        Basis(sf.n, &u, &v);
+        const float r = std::sqrt(static_cast<float>(u1)), phi = 2.0f * kPi * static_cast<float>(u2);
+        dir = (r * std::cos(phi) * u + r * std::sin(phi) * v +
+               std::sqrt(std::max(0.0f, 1.0f - static_cast<float>(u1))) * sf.n)
+                  .normalized();
+        d_env = env_from_head * dir;
+        pdf_l = light.map->Pdf(d_env);
       }
-      const size_t np = px.size();
-      if (np == 0) continue;
-      rngs.clear();
-      for (size_t i = 0; i < (stochastic ? np : 0); ++i) {
-        const uint64_t pixel = static_cast<uint64_t>(py[i]) * static_cast<uint64_t>(width) + static_cast<uint64_t>(px[i]);
-        rngs.emplace_back(frame_seed ^ (0x9E3779B97F4A7C15ULL * (pixel + 1)));
+      const float c = sf.n.dot(dir);
+      if (c <= 0.0f || sf.ng.dot(dir) <= 0.0f) continue;
+      const float denominator = static_cast<float>(n_l) * pdf_l + static_cast<float>(n_b) * c / kPi;
+      if (!(denominator > 0.0f)) continue;
+      Emit(ctx, false, i, dir, inf, light.map->Radiance(d_env) * (light.scale * c / denominator), s);
+    }
+  }
+}
+
+// Ambient occlusion: cosine-weighted rays up to max_distance; diffuse only.
+void SampleAmbient(const RenderContext& ctx, const ResolvedLight& light, TileScratch* s) {
+  for (int k = 0; k < light.samples; ++k) {
+    for (size_t i = 0; i < s->px.size(); ++i) {
+      if (!s->has_hit[i]) continue;
+      const Surface& sf = s->surf[i];
+      const float xi1 = (static_cast<float>(k) + static_cast<float>(s->rngs[i].Uniform())) / light.samples;
+      const float xi2 = static_cast<float>(s->rngs[i].Uniform());
+      Vec3f u, v;
+      Basis(sf.n, &u, &v);
+      const float r = std::sqrt(xi1), phi = 2.0f * kPi * xi2;
+      const Vec3f dir =
+          (r * std::cos(phi) * u + r * std::sin(phi) * v + std::sqrt(std::max(0.0f, 1.0f - xi1)) * sf.n).normalized();
+      if (sf.ng.dot(dir) <= 0.0f) continue;
+      // Cosine-weighted: radiance·cos/pdf = radiance·π; diffuse only.
+      const Pending p{static_cast<int>(i), light.color * (kPi * sf.brdf.diffuse_weight() / light.samples),
+                      Vec3f::Zero()};
+      if (!ctx.options->shadows) {
+        s->irr[i] += p.irradiance;
+        continue;
       }
-      rays.resize(np);
-      surf.resize(np);
-      has_hit.assign(np, 0);
-      color.assign(np, Vec3f::Zero());
-      hit_count.assign(np, 0.0f);
-      if (sss) {
-        albedo_sum.assign(np, Vec3f::Zero());
-        irr_sum.assign(np, Vec3f::Zero());
-        rest_sum.assign(np, Vec3f::Zero());
-        depth_sum.assign(np, 0.0f);
-      }
-      int64_t tile_shadow_rays = 0;
+      s->sampled_rays.push_back(Ray{sf.p + ctx.eps * sf.ng, dir, 0.0f, light.max_distance});
+      s->sampled_pending.push_back(p);
+    }
+  }
+}
 
-      auto make_primary = [&](size_t i, float ox, float oy) {
-        const Vec3f d_cam((static_cast<float>(px[i]) + ox - cx) / fx, (static_cast<float>(py[i]) + oy - cy) / fy, 1.0f);
-        Ray& r = rays[i];
-        r.origin = eye;
-        r.direction = head_from_cam * d_cam;  // unnormalised: t is the depth z in mm
-        r.tnear = 0.0f;
-        r.tfar = std::numeric_limits<float>::infinity();
-      };
-      auto interpolate = [&](const Hit& h, const std::vector<Vec3f>& a) {
-        const float b1 = h.u, b2 = h.v, b0 = 1.0f - b1 - b2;
-        return Vec3f(b0 * a[static_cast<size_t>(F(h.triangle, 0))] + b1 * a[static_cast<size_t>(F(h.triangle, 1))] +
-                     b2 * a[static_cast<size_t>(F(h.triangle, 2))]);
-      };
-      auto interpolate_uv = [&](const Hit& h) {
-        const float b1 = h.u, b2 = h.v, b0 = 1.0f - b1 - b2;
-        return Eigen::Vector2f(b0 * UV[static_cast<size_t>(F(h.triangle, 0))] +
-                               b1 * UV[static_cast<size_t>(F(h.triangle, 1))] +
-                               b2 * UV[static_cast<size_t>(F(h.triangle, 2))]);
-      };
-      // Shading normal facing the viewer side of the geometric normal.
-      auto orient = [&](const Hit& h, const Vec3f& d, Vec3f* n, Vec3f* ng) {
-        *ng = h.geometric_normal;
-        if (ng->dot(d) > 0.0f) *ng = -*ng;
-        Vec3f s = interpolate(h, N);
-        const float len = s.norm();
-        s = len > 1e-12f ? Vec3f(s / len) : *ng;
-        if (s.dot(*ng) < 0.0f) s = -s;
-        *n = s;
-      };
-      auto write_passes = [&]() {
-        for (size_t i = 0; i < np; ++i) {
-          const Hit& h = hits[i];
-          if (!h.valid()) continue;
-          Vec3f n, ng;
-          orient(h, rays[i].direction, &n, &ng);
-          const Vec3f n_cam = cam_from_head_r * n;
-          const Eigen::Vector2f uv = interpolate_uv(h);
-          out.depth.at<float>(py[i], px[i]) = h.t;
-          out.normal.at<cv::Vec3f>(py[i], px[i]) = cv::Vec3f(n_cam.x(), n_cam.y(), n_cam.z());
-          out.uv.at<cv::Vec2f>(py[i], px[i]) = cv::Vec2f(uv.x(), uv.y());
-          out.triangle_id.at<int>(py[i], px[i]) = h.triangle;
-          out.part_id.at<int>(py[i], px[i]) = tri_part[static_cast<size_t>(h.triangle)];
+// Light samples of every light: contributions now, visibility by shadow rays after.
+void SampleLights(const RenderContext& ctx, TileScratch* s) {
+  s->coherent_rays.clear();
+  s->sampled_rays.clear();
+  s->coherent_pending.clear();
+  s->sampled_pending.clear();
+  for (const ResolvedLight& light : ctx.lights) {
+    switch (light.kind) {
+      case LightKind::kDirectional:
+        SampleDirectional(ctx, light, s);
+        break;
+      case LightKind::kSphere:
+        SampleSphere(ctx, light, s);
+        break;
+      case LightKind::kEnvironment:
+        SampleEnvironment(ctx, light, s);
+        break;
+      case LightKind::kAmbient:
+        SampleAmbient(ctx, light, s);
+        break;
+    }
+  }
+}
+
+// Adds this sample's light to the pixels' sums (and the subsurface sums apart).
+void AccumulateSample(const RenderContext& ctx, TileScratch* s) {
+  for (size_t i = 0; i < s->px.size(); ++i) {
+    const Vec3f albedo = s->has_hit[i] ? s->surf[i].brdf.albedo() : Vec3f::Zero();
+    s->color[i] += albedo.cwiseProduct(s->irr[i]) + s->spec[i];
+    if (ctx.sss) {
+      s->irr_sum[i] += s->irr[i];
+      s->rest_sum[i] += s->spec[i];
+    }
+  }
+}
+
+// The tile's pixel means: image and alpha (and the subsurface buffers).
+void StoreTile(const RenderContext& ctx, const TileScratch& s, RenderResult* out, SubsurfaceBuffers* sss) {
+  const float inv_samples = ctx.inv_samples;
+  for (size_t i = 0; i < s.px.size(); ++i) {
+    const int x = s.px[i], y = s.py[i];
+    const Vec3f c = s.color[i] * inv_samples;
+    out->image.at<cv::Vec3f>(y, x) = cv::Vec3f(c.x(), c.y(), c.z());
+    out->alpha.at<float>(y, x) = s.hit_count[i] * inv_samples;
+    if (ctx.sss) {
+      const Vec3f ir = s.irr_sum[i] * inv_samples, re = s.rest_sum[i] * inv_samples;
+      const Vec3f al = s.hit_count[i] > 0 ? Vec3f(s.albedo_sum[i] / s.hit_count[i]) : Vec3f::Zero();
+      sss->irradiance.at<cv::Vec3f>(y, x) = cv::Vec3f(ir.x(), ir.y(), ir.z());
+      sss->rest.at<cv::Vec3f>(y, x) = cv::Vec3f(re.x(), re.y(), re.z());
+      sss->albedo.at<cv::Vec3f>(y, x) = cv::Vec3f(al.x(), al.y(), al.z());
+      sss->depth.at<float>(y, x) = s.hit_count[i] > 0 ? s.depth_sum[i] / s.hit_count[i] : 0.0f;
+    }
+  }
+}
+
+// One pass of the separable, depth-aware Gaussian blur of the diffuse irradiance; σ
+// per channel in mm (red 1, green 0.5, blue 0.25 × subsurface_mm), in pixels fx·σ/z.
+cv::Mat BlurSubsurface(const RenderContext& ctx, const cv::Mat& depth, const cv::Mat& src, bool horizontal) {
+  const float channel_scale[3] = {1.0f, 0.5f, 0.25f};
+  const float subsurface_mm = static_cast<float>(ctx.options->subsurface_mm);
+  const float sigma_z = static_cast<float>(2.0 * ctx.options->subsurface_mm + 0.5);  // mm
+  constexpr int kMaxRadius = 48;
+  const int width = ctx.width, height = ctx.height;
+  cv::Mat dst(height, width, CV_32FC3, cv::Scalar::all(0));
+  tbb::parallel_for(tbb::blocked_range<int>(0, height, 4), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y != rows.end(); ++y) {
+      for (int x = 0; x < width; ++x) {
+        const float z = depth.at<float>(y, x);
+        if (z <= 0.0f) {
+          dst.at<cv::Vec3f>(y, x) = src.at<cv::Vec3f>(y, x);
+          continue;
         }
-      };
-
-      for (int s = 0; s < num_samples; ++s) {
-        const int sx = s % n_axis, sy = s / n_axis;
-        for (size_t i = 0; i < np; ++i) {
-          float ox = 0.0f, oy = 0.0f;
-          if (n_axis > 1) {
-            ox = (static_cast<float>(sx) + static_cast<float>(rngs[i].Uniform())) / n_axis - 0.5f;
-            oy = (static_cast<float>(sy) + static_cast<float>(rngs[i].Uniform())) / n_axis - 0.5f;
-          }
-          make_primary(i, ox, oy);
-        }
-        caster.IntersectBatch(rays, &hits, RayCoherence::kCoherent);
-        if (options.passes && n_axis == 1) write_passes();
-
-        // Surfaces and misses.
-        irr.assign(np, Vec3f::Zero());
-        spec.assign(np, Vec3f::Zero());
-        for (size_t i = 0; i < np; ++i) {
-          const Hit& h = hits[i];
-          has_hit[i] = h.valid() ? 1 : 0;
-          if (!h.valid()) {
-            Vec3f bg = background;
-            if (background_env != nullptr) {
-              const Vec3f d_env = background_env->head_from_env.transpose() * rays[i].direction.normalized();
-              bg = background_env->scale * background_env->map->Radiance(d_env);
-            }
-            spec[i] = bg;  // passes through unchanged
+        cv::Vec3f result;
+        for (int c = 0; c < 3; ++c) {
+          const float sigma_px = subsurface_mm * channel_scale[c] * ctx.fx / z;
+          const int radius = std::min(kMaxRadius, static_cast<int>(std::ceil(2.5f * sigma_px)));
+          if (radius < 1) {
+            result[c] = src.at<cv::Vec3f>(y, x)[c];
             continue;
           }
-          Surface& sf = surf[i];
-          const Vec3f d = rays[i].direction;
-          orient(h, d, &sf.n, &sf.ng);
-          const float b1 = h.u, b2 = h.v, b0 = 1.0f - b1 - b2;
-          sf.p = b0 * V[static_cast<size_t>(F(h.triangle, 0))] + b1 * V[static_cast<size_t>(F(h.triangle, 1))] +
-                 b2 * V[static_cast<size_t>(F(h.triangle, 2))];
-          const Material mat = MaterialAt(h.triangle, interpolate_uv(h));
-          sf.brdf = PreparedBrdf(mat, sf.n, -d.normalized());
-          hit_count[i] += 1.0f;
-          if (sss) {
-            albedo_sum[i] += mat.albedo;
-            depth_sum[i] += h.t;
+          float sum = 0.0f, wsum = 0.0f;
+          for (int k = -radius; k <= radius; ++k) {
+            const int xx = horizontal ? x + k : x, yy = horizontal ? y : y + k;
+            if (xx < 0 || yy < 0 || xx >= width || yy >= height) continue;
+            const float zz = depth.at<float>(yy, xx);
+            if (zz <= 0.0f) continue;
+            const float dz = (zz - z) / sigma_z;
+            const float w = std::exp(-0.5f * (static_cast<float>(k * k) / (sigma_px * sigma_px) + dz * dz));
+            sum += w * src.at<cv::Vec3f>(yy, xx)[c];
+            wsum += w;
           }
+          result[c] = sum / wsum;
         }
-
-        // Light samples: contributions now, visibility by shadow rays.
-        coherent_rays.clear();
-        sampled_rays.clear();
-        coherent_pending.clear();
-        sampled_pending.clear();
-        auto emit = [&](bool coherent, size_t i, const Vec3f& dir, float tfar, const Vec3f& radiance_cos) {
-          const Surface& sf = surf[i];
-          const Pending p{static_cast<int>(i), radiance_cos * sf.brdf.diffuse_weight(),
-                          radiance_cos * sf.brdf.Specular(dir)};
-          if (!options.shadows) {
-            irr[i] += p.irradiance;
-            spec[i] += p.specular;
-            return;
-          }
-          const Ray r{sf.p + eps * sf.ng, dir, 0.0f, tfar};
-          (coherent ? coherent_rays : sampled_rays).push_back(r);
-          (coherent ? coherent_pending : sampled_pending).push_back(p);
-        };
-        const float inf = std::numeric_limits<float>::infinity();
-        for (const ResolvedLight& light : lights) {
-          switch (light.kind) {
-            case LightKind::kDirectional:
-              for (size_t i = 0; i < np; ++i) {
-                if (!has_hit[i]) continue;
-                const float c = surf[i].n.dot(light.direction);
-                if (c <= 0.0f || surf[i].ng.dot(light.direction) <= 0.0f) continue;
-                emit(true, i, light.direction, inf, light.color * c);
-              }
-              break;
-            case LightKind::kSphere:
-              for (int k = 0; k < light.samples; ++k) {
-                for (size_t i = 0; i < np; ++i) {
-                  if (!has_hit[i]) continue;
-                  const Surface& sf = surf[i];
-                  const Vec3f wc = light.centre - sf.p;
-                  const float dist = wc.norm();
-                  const float xi1 = (static_cast<float>(k) + static_cast<float>(rngs[i].Uniform())) / light.samples;
-                  const float xi2 = static_cast<float>(rngs[i].Uniform());
-                  if (dist <= light.radius * 1.0001f) continue;
-                  const float sin2 = light.radius * light.radius / (dist * dist);
-                  const float cos_max = std::sqrt(std::max(0.0f, 1.0f - sin2));
-                  const float one_minus = sin2 / (1.0f + cos_max);
-                  const float cos_t = 1.0f - xi1 * one_minus;
-                  const float sin_t = std::sqrt(std::max(0.0f, 1.0f - cos_t * cos_t));
-                  const float phi = 2.0f * kPi * xi2;
-                  const Vec3f w = wc / dist;
-                  Vec3f u, v;
-                  Basis(w, &u, &v);
-                  const Vec3f dir = (sin_t * std::cos(phi) * u + sin_t * std::sin(phi) * v + cos_t * w).normalized();
-                  const float c = sf.n.dot(dir);
-                  if (c <= 0.0f || sf.ng.dot(dir) <= 0.0f) continue;
-                  const float t_hit = dist * cos_t - std::sqrt(std::max(0.0f, light.radius * light.radius -
-                                                                                  dist * dist * sin_t * sin_t));
-                  const float inv_pdf = 2.0f * kPi * one_minus;
-                  emit(false, i, dir, t_hit * (1.0f - 1e-4f), light.color * (c * inv_pdf / light.samples));
-                }
-              }
-              break;
-            case LightKind::kEnvironment: {
-              // Multiple importance sampling (balance heuristic, Veach 1997): n_l samples
-              // from the map's luminance distribution and n_b cosine-weighted samples;
-              // every sample is weighted by 1 / (n_l·pdf_l + n_b·pdf_b).
-              const int n_l = (light.samples + 1) / 2, n_b = light.samples - n_l;
-              const Mat3f env_from_head = light.head_from_env.transpose();
-              for (int k = 0; k < light.samples; ++k) {
-                const bool from_map = k < n_l;
-                const int stratum = from_map ? k : k - n_l, strata = from_map ? n_l : n_b;
-                for (size_t i = 0; i < np; ++i) {
-                  if (!has_hit[i]) continue;
-                  const Surface& sf = surf[i];
-                  const double u1 = (stratum + rngs[i].Uniform()) / strata;
-                  const double u2 = rngs[i].Uniform();
-                  Vec3f d_env, dir;
-                  float pdf_l = 0.0f;
-                  if (from_map) {
-                    d_env = light.map->Sample(u1, u2, &pdf_l);
-                    dir = light.head_from_env * d_env;
-                  } else {
-                    Vec3f u, v;
-                    Basis(sf.n, &u, &v);
-                    const float r = std::sqrt(static_cast<float>(u1)), phi = 2.0f * kPi * static_cast<float>(u2);
-                    dir = (r * std::cos(phi) * u + r * std::sin(phi) * v +
-                           std::sqrt(std::max(0.0f, 1.0f - static_cast<float>(u1))) * sf.n)
-                              .normalized();
-                    d_env = env_from_head * dir;
-                    pdf_l = light.map->Pdf(d_env);
-                  }
-                  const float c = sf.n.dot(dir);
-                  if (c <= 0.0f || sf.ng.dot(dir) <= 0.0f) continue;
-                  const float denominator = static_cast<float>(n_l) * pdf_l + static_cast<float>(n_b) * c / kPi;
-                  if (!(denominator > 0.0f)) continue;
-                  emit(false, i, dir, inf, light.map->Radiance(d_env) * (light.scale * c / denominator));
-                }
-              }
-              break;
-            }
-            case LightKind::kAmbient:
-              for (int k = 0; k < light.samples; ++k) {
-                for (size_t i = 0; i < np; ++i) {
-                  if (!has_hit[i]) continue;
-                  const Surface& sf = surf[i];
-                  const float xi1 = (static_cast<float>(k) + static_cast<float>(rngs[i].Uniform())) / light.samples;
-                  const float xi2 = static_cast<float>(rngs[i].Uniform());
-                  Vec3f u, v;
-                  Basis(sf.n, &u, &v);
-                  const float r = std::sqrt(xi1), phi = 2.0f * kPi * xi2;
-                  const Vec3f dir =
-                      (r * std::cos(phi) * u + r * std::sin(phi) * v + std::sqrt(std::max(0.0f, 1.0f - xi1)) * sf.n)
-                          .normalized();
-                  if (sf.ng.dot(dir) <= 0.0f) continue;
-                  // Cosine-weighted: radiance·cos/pdf = radiance·π; diffuse only.
-                  const Pending p{static_cast<int>(i), light.color * (kPi * sf.brdf.diffuse_weight() / light.samples),
-                                  Vec3f::Zero()};
-                  if (!options.shadows) {
-                    irr[i] += p.irradiance;
-                    continue;
-                  }
-                  sampled_rays.push_back(Ray{sf.p + eps * sf.ng, dir, 0.0f, light.max_distance});
-                  sampled_pending.push_back(p);
-                }
-              }
-              break;
-          }
-        }
-        auto resolve = [&](const std::vector<Ray>& rs, const std::vector<Pending>& ps, RayCoherence coherence) {
-          if (rs.empty()) return;
-          caster.OccludedBatch(rs, &occluded, coherence);
-          for (size_t k = 0; k < rs.size(); ++k) {
-            if (occluded[k]) continue;
-            irr[static_cast<size_t>(ps[k].pixel)] += ps[k].irradiance;
-            spec[static_cast<size_t>(ps[k].pixel)] += ps[k].specular;
-          }
-          tile_shadow_rays += static_cast<int64_t>(rs.size());
-        };
-        resolve(coherent_rays, coherent_pending, RayCoherence::kCoherent);
-        resolve(sampled_rays, sampled_pending, RayCoherence::kIncoherent);
-
-        for (size_t i = 0; i < np; ++i) {
-          const Vec3f albedo = has_hit[i] ? surf[i].brdf.albedo() : Vec3f::Zero();
-          color[i] += albedo.cwiseProduct(irr[i]) + spec[i];
-          if (sss) {
-            irr_sum[i] += irr[i];
-            rest_sum[i] += spec[i];
-          }
-        }
+        dst.at<cv::Vec3f>(y, x) = result;
       }
-      if (options.passes && n_axis > 1) {  // passes from the pixel centres
-        for (size_t i = 0; i < np; ++i) make_primary(i, 0.0f, 0.0f);
-        caster.IntersectBatch(rays, &hits, RayCoherence::kCoherent);
-        write_passes();
-        primary_rays += static_cast<int64_t>(np);
-      }
-      for (size_t i = 0; i < np; ++i) {
-        const Vec3f c = color[i] * inv_samples;
-        out.image.at<cv::Vec3f>(py[i], px[i]) = cv::Vec3f(c.x(), c.y(), c.z());
-        out.alpha.at<float>(py[i], px[i]) = hit_count[i] * inv_samples;
-        if (sss) {
-          const Vec3f ir = irr_sum[i] * inv_samples, re = rest_sum[i] * inv_samples;
-          const Vec3f al = hit_count[i] > 0 ? Vec3f(albedo_sum[i] / hit_count[i]) : Vec3f::Zero();
-          sss_irr.at<cv::Vec3f>(py[i], px[i]) = cv::Vec3f(ir.x(), ir.y(), ir.z());
-          sss_rest.at<cv::Vec3f>(py[i], px[i]) = cv::Vec3f(re.x(), re.y(), re.z());
-          sss_albedo.at<cv::Vec3f>(py[i], px[i]) = cv::Vec3f(al.x(), al.y(), al.z());
-          sss_depth.at<float>(py[i], px[i]) = hit_count[i] > 0 ? depth_sum[i] / hit_count[i] : 0.0f;
-        }
-      }
-      primary_rays += static_cast<int64_t>(np) * num_samples;
-      shadow_rays += tile_shadow_rays;
     }
   });
+  return dst;
+}
 
-  if (sss) {
-    // Separable, depth-aware Gaussian blur of the diffuse irradiance; σ per channel
-    // in mm (red 1, green 0.5, blue 0.25 × subsurface_mm), in pixels fx·σ/z.
-    const float channel_scale[3] = {1.0f, 0.5f, 0.25f};
-    const float sigma_z = static_cast<float>(2.0 * options.subsurface_mm + 0.5);  // mm
-    constexpr int kMaxRadius = 48;
-    auto blur_pass = [&](const cv::Mat& src, cv::Mat& dst, bool horizontal) {
-      dst = cv::Mat(height, width, CV_32FC3, cv::Scalar::all(0));
-      tbb::parallel_for(tbb::blocked_range<int>(0, height, 4), [&](const tbb::blocked_range<int>& rows) {
-        for (int y = rows.begin(); y != rows.end(); ++y) {
-          for (int x = 0; x < width; ++x) {
-            const float z = sss_depth.at<float>(y, x);
-            if (z <= 0.0f) {
-              dst.at<cv::Vec3f>(y, x) = src.at<cv::Vec3f>(y, x);
-              continue;
-            }
-            cv::Vec3f result;
-            for (int c = 0; c < 3; ++c) {
-              const float sigma_px = static_cast<float>(options.subsurface_mm) * channel_scale[c] * fx / z;
-              const int radius = std::min(kMaxRadius, static_cast<int>(std::ceil(2.5f * sigma_px)));
-              if (radius < 1) {
-                result[c] = src.at<cv::Vec3f>(y, x)[c];
-                continue;
-              }
-              float sum = 0.0f, wsum = 0.0f;
-              for (int k = -radius; k <= radius; ++k) {
-                const int xx = horizontal ? x + k : x, yy = horizontal ? y : y + k;
-                if (xx < 0 || yy < 0 || xx >= width || yy >= height) continue;
-                const float zz = sss_depth.at<float>(yy, xx);
-                if (zz <= 0.0f) continue;
-                const float dz = (zz - z) / sigma_z;
-                const float w = std::exp(-0.5f * (static_cast<float>(k * k) / (sigma_px * sigma_px) + dz * dz));
-                sum += w * src.at<cv::Vec3f>(yy, xx)[c];
-                wsum += w;
-              }
-              result[c] = sum / wsum;
-            }
-            dst.at<cv::Vec3f>(y, x) = result;
-          }
-        }
-      });
-    };
-    cv::Mat tmp, blurred;
-    blur_pass(sss_irr, tmp, true);
-    blur_pass(tmp, blurred, false);
-    tbb::parallel_for(tbb::blocked_range<int>(0, height, 8), [&](const tbb::blocked_range<int>& rows) {
-      for (int y = rows.begin(); y != rows.end(); ++y) {
-        for (int x = 0; x < width; ++x) {
-          const cv::Vec3f& a = sss_albedo.at<cv::Vec3f>(y, x);
-          const cv::Vec3f& b = blurred.at<cv::Vec3f>(y, x);
-          const cv::Vec3f& r = sss_rest.at<cv::Vec3f>(y, x);
-          out.image.at<cv::Vec3f>(y, x) = cv::Vec3f(a[0] * b[0] + r[0], a[1] * b[1] + r[1], a[2] * b[2] + r[2]);
-        }
+// The screen-space subsurface approximation: image = albedo · blurred irradiance + rest.
+void ApplySubsurface(const RenderContext& ctx, const SubsurfaceBuffers& sss, cv::Mat* image) {
+  const cv::Mat blurred = BlurSubsurface(ctx, sss.depth, BlurSubsurface(ctx, sss.depth, sss.irradiance, true), false);
+  tbb::parallel_for(tbb::blocked_range<int>(0, ctx.height, 8), [&](const tbb::blocked_range<int>& rows) {
+    for (int y = rows.begin(); y != rows.end(); ++y) {
+      for (int x = 0; x < ctx.width; ++x) {
+        const cv::Vec3f& a = sss.albedo.at<cv::Vec3f>(y, x);
+        const cv::Vec3f& b = blurred.at<cv::Vec3f>(y, x);
+        const cv::Vec3f& r = sss.rest.at<cv::Vec3f>(y, x);
+        image->at<cv::Vec3f>(y, x) = cv::Vec3f(a[0] * b[0] + r[0], a[1] * b[1] + r[1], a[2] * b[2] + r[2]);
       }
-    });
-  }
+    }
+  });
+}
+
+}  // namespace
+
+// The camera, lights and sampling resolved once (MakeContext); tiles in parallel
+// (RenderTile); then the subsurface blur (ApplySubsurface).
+RenderResult Renderer::Impl::Render(const Camera& camera, const LightRig& rig, const RenderOptions& options,
+                                    Rng& rng) const {
+  const auto start = std::chrono::steady_clock::now();
+  options.Check();
+  camera.intrinsics.Validate("Render camera");
+  ValidateLightRig(rig);
+  const RenderContext ctx = MakeContext(camera, rig, options, rng.NextU64());
+  RenderResult out = AllocateResult(ctx.width, ctx.height, options.passes);
+  SubsurfaceBuffers sss;
+  if (ctx.sss) sss = AllocateSubsurface(ctx.width, ctx.height);
+
+  std::atomic<int64_t> primary_rays{0}, shadow_rays{0};
+  const int num_tiles = ctx.tiles_x * ctx.tiles_y;
+  tbb::parallel_for(tbb::blocked_range<int>(0, num_tiles, 1), [&](const tbb::blocked_range<int>& range) {
+    TileScratch s;  // reused across this range's tiles
+    for (int t = range.begin(); t != range.end(); ++t) {
+      if (!PrepareTile(ctx, t, &s)) continue;
+      RenderTile(ctx, &s, &out, &sss);
+      primary_rays += s.primary_rays;
+      shadow_rays += s.shadow_rays;
+    }
+  });
+  if (ctx.sss) ApplySubsurface(ctx, sss, &out.image);
 
   out.stats.primary_rays = primary_rays.load();
   out.stats.shadow_rays = shadow_rays.load();
   out.stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return out;
+}
+
+void Renderer::Impl::RenderTile(const RenderContext& ctx, TileScratch* s, RenderResult* out,
+                                SubsurfaceBuffers* sss) const {
+  const auto np = static_cast<int64_t>(s->px.size());
+  for (int sample = 0; sample < ctx.num_samples; ++sample) {
+    PrimaryRays(ctx, sample, s);
+    caster.IntersectBatch(s->rays, &s->hits, RayCoherence::kCoherent);
+    if (ctx.options->passes && ctx.n_axis == 1) WritePasses(ctx, *s, out);
+    ShadeHits(ctx, s);
+    SampleLights(ctx, s);
+    TraceShadows(s->coherent_rays, s->coherent_pending, RayCoherence::kCoherent, s);
+    TraceShadows(s->sampled_rays, s->sampled_pending, RayCoherence::kIncoherent, s);
+    AccumulateSample(ctx, s);
+  }
+  if (ctx.options->passes && ctx.n_axis > 1) {  // passes from the pixel centres
+    for (size_t i = 0; i < s->px.size(); ++i) PrimaryRay(ctx, i, 0.0f, 0.0f, s);
+    caster.IntersectBatch(s->rays, &s->hits, RayCoherence::kCoherent);
+    WritePasses(ctx, *s, out);
+    s->primary_rays += np;
+  }
+  StoreTile(ctx, *s, out, sss);
+  s->primary_rays += np * ctx.num_samples;
+}
+
+Vec3f Renderer::Impl::Interpolate(const Hit& h, const std::vector<Vec3f>& a) const {
+  const float b1 = h.u, b2 = h.v, b0 = 1.0f - b1 - b2;
+  return Vec3f(b0 * a[static_cast<size_t>(F(h.triangle, 0))] + b1 * a[static_cast<size_t>(F(h.triangle, 1))] +
+               b2 * a[static_cast<size_t>(F(h.triangle, 2))]);
+}
+
+Eigen::Vector2f Renderer::Impl::InterpolateUv(const Hit& h) const {
+  const float b1 = h.u, b2 = h.v, b0 = 1.0f - b1 - b2;
+  return Eigen::Vector2f(b0 * UV[static_cast<size_t>(F(h.triangle, 0))] +
+                         b1 * UV[static_cast<size_t>(F(h.triangle, 1))] +
+                         b2 * UV[static_cast<size_t>(F(h.triangle, 2))]);
+}
+
+void Renderer::Impl::Orient(const Hit& h, const Vec3f& d, Vec3f* n, Vec3f* ng) const {
+  *ng = h.geometric_normal;
+  if (ng->dot(d) > 0.0f) *ng = -*ng;
+  Vec3f s = Interpolate(h, N);
+  const float len = s.norm();
+  s = len > 1e-12f ? Vec3f(s / len) : *ng;
+  if (s.dot(*ng) < 0.0f) s = -s;
+  *n = s;
+}
+
+void Renderer::Impl::WritePasses(const RenderContext& ctx, const TileScratch& s, RenderResult* out) const {
+  for (size_t i = 0; i < s.px.size(); ++i) {
+    const Hit& h = s.hits[i];
+    if (!h.valid()) continue;
+    const int x = s.px[i], y = s.py[i];
+    Vec3f n, ng;
+    Orient(h, s.rays[i].direction, &n, &ng);
+    const Vec3f n_cam = ctx.cam_from_head_r * n;
+    const Eigen::Vector2f uv = InterpolateUv(h);
+    out->depth.at<float>(y, x) = h.t;
+    out->normal.at<cv::Vec3f>(y, x) = cv::Vec3f(n_cam.x(), n_cam.y(), n_cam.z());
+    out->uv.at<cv::Vec2f>(y, x) = cv::Vec2f(uv.x(), uv.y());
+    out->triangle_id.at<int>(y, x) = h.triangle;
+    out->part_id.at<int>(y, x) = tri_part[static_cast<size_t>(h.triangle)];
+  }
+}
+
+void Renderer::Impl::ShadeHits(const RenderContext& ctx, TileScratch* s) const {
+  const size_t np = s->px.size();
+  s->irr.assign(np, Vec3f::Zero());
+  s->spec.assign(np, Vec3f::Zero());
+  for (size_t i = 0; i < np; ++i) {
+    const Hit& h = s->hits[i];
+    s->has_hit[i] = h.valid() ? 1 : 0;
+    if (!h.valid()) {
+      Vec3f bg = ctx.background;
+      if (ctx.background_env >= 0) {
+        const ResolvedLight& env = ctx.lights[static_cast<size_t>(ctx.background_env)];
+        const Vec3f d_env = env.head_from_env.transpose() * s->rays[i].direction.normalized();
+        bg = env.scale * env.map->Radiance(d_env);
+      }
+      s->spec[i] = bg;  // passes through unchanged
+      continue;
+    }
+    Surface& sf = s->surf[i];
+    const Vec3f d = s->rays[i].direction;
+    Orient(h, d, &sf.n, &sf.ng);
+    const float b1 = h.u, b2 = h.v, b0 = 1.0f - b1 - b2;
+    sf.p = b0 * V[static_cast<size_t>(F(h.triangle, 0))] + b1 * V[static_cast<size_t>(F(h.triangle, 1))] +
+           b2 * V[static_cast<size_t>(F(h.triangle, 2))];
+    const Material mat = MaterialAt(h.triangle, InterpolateUv(h));
+    sf.brdf = PreparedBrdf(mat, sf.n, -d.normalized());
+    s->hit_count[i] += 1.0f;
+    if (ctx.sss) {
+      s->albedo_sum[i] += mat.albedo;
+      s->depth_sum[i] += h.t;
+    }
+  }
+}
+
+void Renderer::Impl::TraceShadows(const std::vector<Ray>& rays, const std::vector<Pending>& pending,
+                                  RayCoherence coherence, TileScratch* s) const {
+  if (rays.empty()) return;
+  caster.OccludedBatch(rays, &s->occluded, coherence);
+  for (size_t k = 0; k < rays.size(); ++k) {
+    if (s->occluded[k]) continue;
+    s->irr[static_cast<size_t>(pending[k].pixel)] += pending[k].irradiance;
+    s->spec[static_cast<size_t>(pending[k].pixel)] += pending[k].specular;
+  }
+  s->shadow_rays += static_cast<int64_t>(rays.size());
 }
 
 // ---- Motion blur ------------------------------------------------------------------------
