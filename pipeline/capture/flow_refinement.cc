@@ -250,6 +250,23 @@ double BuildFlowPyramid(const FlowRefinementOptions& o, const cv::Mat& gray8, st
   return MsSince(tp);
 }
 
+// Which of the mesh's triangles are face chart triangles. FaceChartTriangles returns a
+// subset of the rig's triangles; they are matched by their sorted corners, so the
+// corner order does not matter.
+std::vector<uint8_t> MarkChartTriangles(const TriMesh& mesh, const MatX3i& chart_F) {
+  auto key = [](int a, int b, int c) {
+    std::array<int, 3> k = {a, b, c};
+    std::sort(k.begin(), k.end());
+    return k;
+  };
+  std::set<std::array<int, 3>> chart_set;
+  for (int f = 0; f < chart_F.rows(); ++f) chart_set.insert(key(chart_F(f, 0), chart_F(f, 1), chart_F(f, 2)));
+  std::vector<uint8_t> is_chart_tri(mesh.num_faces(), 0);
+  for (int f = 0; f < mesh.num_faces(); ++f)
+    is_chart_tri[f] = chart_set.count(key(mesh.F(f, 0), mesh.F(f, 1), mesh.F(f, 2))) > 0;
+  return is_chart_tri;
+}
+
 // The point counts of ξ_β and the MLS recovery, into the frame's record.
 void RecordCounts(const RecoverCounts& counts, RefinedFrame* out) {
   out->trusted = counts.trusted;
@@ -329,6 +346,31 @@ struct FlowRefiner::Impl {
   Impl(const FaceRig& r, const CameraIntrinsics& k, const FlowRefinementOptions& o) : rig(r), K(k), options(o) {}
 
   void Build();
+  // The steps of Build, in order (see Build).
+  // The face chart (chart_F, chart_vertex) and its free variables (free_of, num_free);
+  // vertices on its seam with the rest of the head are pinned. Returns each rig
+  // vertex's chart index (−1: not on the chart).
+  std::vector<int> BuildChart();
+  // The inner landmarks (iBUG 18–68): their rig vertices and free variables.
+  void FindInnerLandmarks(const std::vector<int>& chart_of);
+  // The flow points: a greedy Poisson-disk sample of the free chart vertices on the
+  // neutral face, inner landmarks first; at least 3.
+  void SampleFlowPoints(const std::vector<int>& chart_of);
+  // Each flow point's free variable and incident chart triangles (for its normal).
+  // Returns each rig vertex's flow point (−1: none).
+  std::vector<int> IndexFlowPoints(const std::vector<int>& chart_of);
+  // The chart's edges and their lengths on the neutral face, per chart vertex.
+  std::vector<std::vector<std::pair<int, double>>> ChartEdges(const std::vector<int>& chart_of) const;
+  // Geodesic neighbours of each flow point (ξ_β and the MLS recovery): bounded edge
+  // Dijkstra on the chart of the neutral face.
+  void FindNeighbours(const std::vector<int>& chart_of, const std::vector<int>& flow_of);
+  // Fit points (flow points, then inner landmarks) and their basis rows; the
+  // per-identity caches at α = 0.
+  void BuildFitBases();
+  // The chart as a mesh of its own (neutral face, chart indices).
+  TriMesh ChartMesh(const std::vector<int>& chart_of) const;
+  // The Laplacian system A = λ Lfᵀ M⁻¹ Lf + W (+ ε I), factorised once.
+  void FactorLaplacian(const std::vector<int>& chart_of);
   void SetIdentity(const Eigen::VectorXd& identity);
   // out += Σ_b coeff_b B_b over the non-zero coefficients (all vertices, head frame).
   void AddExpressions(const Eigen::VectorXd& coeff, Eigen::VectorXd* out) const;
@@ -394,6 +436,9 @@ struct FlowRefiner::Impl {
                 std::vector<cv::Mat>* pyramid);
 };
 
+// Sets up everything that does not change per frame (see the header): the face chart
+// and its pinned seam, the inner landmarks, the flow points and their geodesic
+// neighbours, the fit points' basis rows and the factorised Laplacian system.
 void FlowRefiner::Impl::Build() {
   V = rig.num_vertices();
   E = rig.num_expressions();
@@ -402,25 +447,20 @@ void FlowRefiner::Impl::Build() {
   if (E <= 0) throw Error(fmt::format("{}: the rig has no expression blendshapes", what));
   if (!(rig.expression_basis.rows() == 3 * V && (I == 0 || rig.identity_basis.rows() == 3 * V)))
     throw Error(fmt::format("{}: the rig's bases do not have 3·#V = {} rows", what, 3 * V));
-  const TriMesh& mesh = rig.neutral;
+  const std::vector<int> chart_of = BuildChart();
+  FindInnerLandmarks(chart_of);
+  SampleFlowPoints(chart_of);
+  const std::vector<int> flow_of = IndexFlowPoints(chart_of);
+  FindNeighbours(chart_of, flow_of);
+  BuildFitBases();
+  if (options.laplacian) FactorLaplacian(chart_of);
+}
 
-  // --- Face chart; vertices on its seam with the rest of the head are pinned.
+std::vector<int> FlowRefiner::Impl::BuildChart() {
+  const TriMesh& mesh = rig.neutral;
   chart_F = FaceChartTriangles(rig);
   std::vector<int> chart_of(V, -1);
-  std::vector<uint8_t> is_chart_tri(mesh.num_faces(), 0);
-  {
-    // FaceChartTriangles returns a subset of the rig's triangles; mark them (by
-    // their sorted corners, so the corner order does not matter).
-    auto key = [](int a, int b, int c) {
-      std::array<int, 3> k = {a, b, c};
-      std::sort(k.begin(), k.end());
-      return k;
-    };
-    std::set<std::array<int, 3>> chart_set;
-    for (int f = 0; f < chart_F.rows(); ++f) chart_set.insert(key(chart_F(f, 0), chart_F(f, 1), chart_F(f, 2)));
-    for (int f = 0; f < mesh.num_faces(); ++f)
-      is_chart_tri[f] = chart_set.count(key(mesh.F(f, 0), mesh.F(f, 1), mesh.F(f, 2))) > 0;
-  }
+  const std::vector<uint8_t> is_chart_tri = MarkChartTriangles(mesh, chart_F);
   for (int f = 0; f < chart_F.rows(); ++f) {
     for (int c = 0; c < 3; ++c) {
       const int v = chart_F(f, c);
@@ -441,9 +481,12 @@ void FlowRefiner::Impl::Build() {
   for (int c = 0; c < nc; ++c) {
     if (!outside[rep[chart_vertex[c]]]) free_of[c] = num_free++;
   }
-  if (num_free <= 0) throw Error(fmt::format("{}: every face chart vertex touches the rest of the head", what));
+  if (num_free <= 0) throw Error("FlowRefiner: every face chart vertex touches the rest of the head");
+  return chart_of;
+}
 
-  // --- Inner landmarks.
+void FlowRefiner::Impl::FindInnerLandmarks(const std::vector<int>& chart_of) {
+  const char* what = "FlowRefiner";
   for (int i = 17; i < LandmarkRigFitter::kNumLandmarks; ++i) {
     const std::string name = fmt::format("ibug_{}", i + 1);
     const int l = rig.LandmarkIndex(name);
@@ -455,110 +498,120 @@ void FlowRefiner::Impl::Build() {
     landmark_vertex.push_back(v);
     landmark_free.push_back(chart_of[v] >= 0 ? free_of[chart_of[v]] : -1);
   }
+}
 
-  // --- Flow points: greedy Poisson-disk sample of the free chart vertices on the
-  // neutral face, inner landmarks first.
-  {
-    const double s = options.flow_point_spacing_mm;
-    std::unordered_map<int64_t, std::vector<int>> grid;
-    auto cell = [&](const Eigen::Vector3d& p, int dx, int dy, int dz) {
-      const int64_t x = static_cast<int64_t>(std::floor(p.x() / s)) + dx;
-      const int64_t y = static_cast<int64_t>(std::floor(p.y() / s)) + dy;
-      const int64_t z = static_cast<int64_t>(std::floor(p.z() / s)) + dz;
-      return (x * 73856093) ^ (y * 19349663) ^ (z * 83492791);
-    };
-    std::vector<uint8_t> taken(V, 0);
-    auto try_add = [&](int v) {
-      if (taken[v] || chart_of[v] < 0 || free_of[chart_of[v]] < 0) return;
-      const Eigen::Vector3d p = mesh.V.row(v).transpose();
-      for (int dx = -1; dx <= 1; ++dx)
-        for (int dy = -1; dy <= 1; ++dy)
-          for (int dz = -1; dz <= 1; ++dz) {
-            auto it = grid.find(cell(p, dx, dy, dz));
-            if (it == grid.end()) continue;
-            for (int u : it->second) {
-              if ((mesh.V.row(u).transpose() - p).norm() < s) return;
-            }
+void FlowRefiner::Impl::SampleFlowPoints(const std::vector<int>& chart_of) {
+  const TriMesh& mesh = rig.neutral;
+  const double s = options.flow_point_spacing_mm;
+  std::unordered_map<int64_t, std::vector<int>> grid;
+  auto cell = [&](const Eigen::Vector3d& p, int dx, int dy, int dz) {
+    const int64_t x = static_cast<int64_t>(std::floor(p.x() / s)) + dx;
+    const int64_t y = static_cast<int64_t>(std::floor(p.y() / s)) + dy;
+    const int64_t z = static_cast<int64_t>(std::floor(p.z() / s)) + dz;
+    return (x * 73856093) ^ (y * 19349663) ^ (z * 83492791);
+  };
+  std::vector<uint8_t> taken(V, 0);
+  auto try_add = [&](int v) {
+    if (taken[v] || chart_of[v] < 0 || free_of[chart_of[v]] < 0) return;
+    const Eigen::Vector3d p = mesh.V.row(v).transpose();
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          auto it = grid.find(cell(p, dx, dy, dz));
+          if (it == grid.end()) continue;
+          for (int u : it->second) {
+            if ((mesh.V.row(u).transpose() - p).norm() < s) return;
           }
-      grid[cell(p, 0, 0, 0)].push_back(v);
-      taken[v] = 1;
-      flow_vertex.push_back(v);
-    };
-    for (int v : landmark_vertex) try_add(v);
-    for (int v : chart_vertex) try_add(v);
-  }
+        }
+    grid[cell(p, 0, 0, 0)].push_back(v);
+    taken[v] = 1;
+    flow_vertex.push_back(v);
+  };
+  for (int v : landmark_vertex) try_add(v);
+  for (int v : chart_vertex) try_add(v);
   const int nf = static_cast<int>(flow_vertex.size());
-  if (nf < 3)
-    throw Error(fmt::format("{}: only {} flow points at a spacing of {} mm", what, nf, options.flow_point_spacing_mm));
+  if (nf < 3) {
+    throw Error(
+        fmt::format("FlowRefiner: only {} flow points at a spacing of {} mm", nf, options.flow_point_spacing_mm));
+  }
+}
+
+std::vector<int> FlowRefiner::Impl::IndexFlowPoints(const std::vector<int>& chart_of) {
+  const int nf = static_cast<int>(flow_vertex.size());
   std::vector<int> flow_of(V, -1);
   for (int i = 0; i < nf; ++i) flow_of[flow_vertex[i]] = i;
   flow_free.resize(nf);
   for (int i = 0; i < nf; ++i) flow_free[i] = free_of[chart_of[flow_vertex[i]]];
-
   // Incident chart triangles of each flow point (for its normal).
-  {
-    std::vector<std::vector<int>> ring(nf);
-    for (int f = 0; f < chart_F.rows(); ++f)
-      for (int c = 0; c < 3; ++c)
-        if (flow_of[chart_F(f, c)] >= 0) ring[flow_of[chart_F(f, c)]].push_back(f);
-    ring_begin.assign(1, 0);
-    for (int i = 0; i < nf; ++i) {
-      ring_triangle.insert(ring_triangle.end(), ring[i].begin(), ring[i].end());
-      ring_begin.push_back(static_cast<int>(ring_triangle.size()));
+  std::vector<std::vector<int>> ring(nf);
+  for (int f = 0; f < chart_F.rows(); ++f)
+    for (int c = 0; c < 3; ++c)
+      if (flow_of[chart_F(f, c)] >= 0) ring[flow_of[chart_F(f, c)]].push_back(f);
+  ring_begin.assign(1, 0);
+  for (int i = 0; i < nf; ++i) {
+    ring_triangle.insert(ring_triangle.end(), ring[i].begin(), ring[i].end());
+    ring_begin.push_back(static_cast<int>(ring_triangle.size()));
+  }
+  return flow_of;
+}
+
+std::vector<std::vector<std::pair<int, double>>> FlowRefiner::Impl::ChartEdges(const std::vector<int>& chart_of) const {
+  const TriMesh& mesh = rig.neutral;
+  std::vector<std::vector<std::pair<int, double>>> adj(chart_vertex.size());
+  for (int f = 0; f < chart_F.rows(); ++f) {
+    for (int c = 0; c < 3; ++c) {
+      const int a = chart_of[chart_F(f, c)], b = chart_of[chart_F(f, (c + 1) % 3)];
+      const double len = (mesh.V.row(chart_F(f, c)) - mesh.V.row(chart_F(f, (c + 1) % 3))).norm();
+      adj[a].emplace_back(b, len);
+      adj[b].emplace_back(a, len);
     }
   }
+  return adj;
+}
 
-  // --- Geodesic neighbours: bounded edge Dijkstra on the chart of the neutral face.
-  {
-    std::vector<std::vector<std::pair<int, double>>> adj(nc);
-    for (int f = 0; f < chart_F.rows(); ++f) {
-      for (int c = 0; c < 3; ++c) {
-        const int a = chart_of[chart_F(f, c)], b = chart_of[chart_F(f, (c + 1) % 3)];
-        const double len = (mesh.V.row(chart_F(f, c)) - mesh.V.row(chart_F(f, (c + 1) % 3))).norm();
-        adj[a].emplace_back(b, len);
-        adj[b].emplace_back(a, len);
+void FlowRefiner::Impl::FindNeighbours(const std::vector<int>& chart_of, const std::vector<int>& flow_of) {
+  const std::vector<std::vector<std::pair<int, double>>> adj = ChartEdges(chart_of);
+  std::vector<double> dist(chart_vertex.size(), std::numeric_limits<double>::infinity());
+  std::vector<int> touched;
+  using Item = std::pair<double, int>;
+  neighbours.begin.assign(1, 0);
+  for (int i = 0; i < static_cast<int>(flow_vertex.size()); ++i) {
+    std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
+    const int src = chart_of[flow_vertex[i]];
+    dist[src] = 0.0;
+    touched.push_back(src);
+    heap.emplace(0.0, src);
+    std::vector<std::pair<double, int>> found;
+    while (!heap.empty()) {
+      const auto [d, a] = heap.top();
+      heap.pop();
+      if (d > dist[a]) continue;
+      if (d > options.mls_radius_mm) break;
+      const int fi = flow_of[chart_vertex[a]];
+      if (fi >= 0 && fi != i) {
+        found.emplace_back(d, fi);
+        if (static_cast<int>(found.size()) >= options.mls_neighbours) break;
       }
-    }
-    std::vector<double> dist(nc, std::numeric_limits<double>::infinity());
-    std::vector<int> touched;
-    using Item = std::pair<double, int>;
-    neighbours.begin.assign(1, 0);
-    for (int i = 0; i < nf; ++i) {
-      std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
-      const int src = chart_of[flow_vertex[i]];
-      dist[src] = 0.0;
-      touched.push_back(src);
-      heap.emplace(0.0, src);
-      std::vector<std::pair<double, int>> found;
-      while (!heap.empty()) {
-        const auto [d, a] = heap.top();
-        heap.pop();
-        if (d > dist[a]) continue;
-        if (d > options.mls_radius_mm) break;
-        const int fi = flow_of[chart_vertex[a]];
-        if (fi >= 0 && fi != i) {
-          found.emplace_back(d, fi);
-          if (static_cast<int>(found.size()) >= options.mls_neighbours) break;
-        }
-        for (const auto& [b, len] : adj[a]) {
-          if (d + len < dist[b]) {
-            if (!std::isfinite(dist[b])) touched.push_back(b);
-            dist[b] = d + len;
-            heap.emplace(dist[b], b);
-          }
+      for (const auto& [b, len] : adj[a]) {
+        if (d + len < dist[b]) {
+          if (!std::isfinite(dist[b])) touched.push_back(b);
+          dist[b] = d + len;
+          heap.emplace(dist[b], b);
         }
       }
-      for (int a : touched) dist[a] = std::numeric_limits<double>::infinity();
-      touched.clear();
-      for (const auto& [d, j] : found) {
-        neighbours.index.push_back(j);
-        neighbours.distance_mm.push_back(d);
-      }
-      neighbours.begin.push_back(static_cast<int>(neighbours.index.size()));
     }
+    for (int a : touched) dist[a] = std::numeric_limits<double>::infinity();
+    touched.clear();
+    for (const auto& [d, j] : found) {
+      neighbours.index.push_back(j);
+      neighbours.distance_mm.push_back(d);
+    }
+    neighbours.begin.push_back(static_cast<int>(neighbours.index.size()));
   }
+}
 
-  // --- Fit points and their basis rows.
+void FlowRefiner::Impl::BuildFitBases() {
+  const TriMesh& mesh = rig.neutral;
   fit_vertex = flow_vertex;
   fit_vertex.insert(fit_vertex.end(), landmark_vertex.begin(), landmark_vertex.end());
   const int np = static_cast<int>(fit_vertex.size());
@@ -577,43 +630,48 @@ void FlowRefiner::Impl::Build() {
   for (int v = 0; v < V; ++v) base_all.segment<3>(3 * v) = mesh.V.row(v).transpose();
   cached_identity = Eigen::VectorXd::Zero(I);
   has_identity = true;
+}
 
-  // --- Laplacian system A = λ Lfᵀ M⁻¹ Lf + W (+ ε I), factorised once.
-  if (options.laplacian) {
-    TriMesh cm;
-    cm.V.resize(nc, 3);
-    for (int c = 0; c < nc; ++c) cm.V.row(c) = mesh.V.row(chart_vertex[c]);
-    cm.F.resize(chart_F.rows(), 3);
-    for (int f = 0; f < chart_F.rows(); ++f)
-      for (int c = 0; c < 3; ++c) cm.F(f, c) = chart_of[chart_F(f, c)];
-    const SpMat L = CotangentLaplacian(cm);
-    const SpMat M = MassMatrix(cm, MassMatrixType::kVoronoi);
-    std::vector<Eigen::Triplet<double>> sel;
-    for (int c = 0; c < nc; ++c)
-      if (free_of[c] >= 0) sel.emplace_back(c, free_of[c], 1.0);
-    SpMat S(nc, num_free);
-    S.setFromTriplets(sel.begin(), sel.end());
-    Eigen::VectorXd minv(nc);
-    for (int c = 0; c < nc; ++c) {
-      const double m = M.coeff(c, c);
-      minv[c] = m > 0.0 ? 1.0 / m : 0.0;
-    }
-    const SpMat Lf = L * S;
-    SpMat A = options.laplacian_order == 2 ? SpMat(Lf.transpose() * minv.asDiagonal() * Lf) : SpMat(S.transpose() * Lf);
-    A *= options.laplacian_smoothness;
-    Eigen::VectorXd w = Eigen::VectorXd::Zero(num_free);
-    for (int i = 0; i < nf; ++i)
-      if (flow_free[i] >= 0) w[flow_free[i]] += options.laplacian_flow_weight;
-    for (size_t j = 0; j < landmark_free.size(); ++j)
-      if (landmark_free[j] >= 0) w[landmark_free[j]] += options.laplacian_landmark_weight;
-    const double eps = 1e-9 * std::max(1.0, A.diagonal().mean());
-    for (int f = 0; f < num_free; ++f) A.coeffRef(f, f) += w[f] + eps;
-    A.makeCompressed();
-    solver.compute(A);
-    if (solver.info() != Eigen::Success)
-      throw Error(fmt::format("{}: the Laplacian system could not be factorised", what));
-    solver_ok = true;
+TriMesh FlowRefiner::Impl::ChartMesh(const std::vector<int>& chart_of) const {
+  const int nc = static_cast<int>(chart_vertex.size());
+  TriMesh cm;
+  cm.V.resize(nc, 3);
+  for (int c = 0; c < nc; ++c) cm.V.row(c) = rig.neutral.V.row(chart_vertex[c]);
+  cm.F.resize(chart_F.rows(), 3);
+  for (int f = 0; f < chart_F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) cm.F(f, c) = chart_of[chart_F(f, c)];
+  return cm;
+}
+
+void FlowRefiner::Impl::FactorLaplacian(const std::vector<int>& chart_of) {
+  const int nc = static_cast<int>(chart_vertex.size());
+  const TriMesh cm = ChartMesh(chart_of);
+  const SpMat L = CotangentLaplacian(cm);
+  const SpMat M = MassMatrix(cm, MassMatrixType::kVoronoi);
+  std::vector<Eigen::Triplet<double>> sel;
+  for (int c = 0; c < nc; ++c)
+    if (free_of[c] >= 0) sel.emplace_back(c, free_of[c], 1.0);
+  SpMat S(nc, num_free);
+  S.setFromTriplets(sel.begin(), sel.end());
+  Eigen::VectorXd minv(nc);
+  for (int c = 0; c < nc; ++c) {
+    const double m = M.coeff(c, c);
+    minv[c] = m > 0.0 ? 1.0 / m : 0.0;
   }
+  const SpMat Lf = L * S;
+  SpMat A = options.laplacian_order == 2 ? SpMat(Lf.transpose() * minv.asDiagonal() * Lf) : SpMat(S.transpose() * Lf);
+  A *= options.laplacian_smoothness;
+  Eigen::VectorXd w = Eigen::VectorXd::Zero(num_free);
+  for (size_t i = 0; i < flow_free.size(); ++i)
+    if (flow_free[i] >= 0) w[flow_free[i]] += options.laplacian_flow_weight;
+  for (size_t j = 0; j < landmark_free.size(); ++j)
+    if (landmark_free[j] >= 0) w[landmark_free[j]] += options.laplacian_landmark_weight;
+  const double eps = 1e-9 * std::max(1.0, A.diagonal().mean());
+  for (int f = 0; f < num_free; ++f) A.coeffRef(f, f) += w[f] + eps;
+  A.makeCompressed();
+  solver.compute(A);
+  if (solver.info() != Eigen::Success) throw Error("FlowRefiner: the Laplacian system could not be factorised");
+  solver_ok = true;
 }
 
 void FlowRefiner::Impl::SetIdentity(const Eigen::VectorXd& identity) {
