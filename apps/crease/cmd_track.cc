@@ -22,6 +22,7 @@
 #include "eval/tracking_metrics.h"
 #include "pipeline/capture/frame_source.h"
 #include "pipeline/capture/tracker.h"
+#include "pipeline/capture/tracking_record.h"
 
 namespace crease::app {
 

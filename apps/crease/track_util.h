@@ -1,6 +1,6 @@
 // Shared by `crease track` and `crease capture`: the global tracker (or the
-// ground-truth-prior control) behind one call, the camera resolution rules, and
-// the preview drawing.
+// ground-truth-prior control) behind one call and the camera resolution rules
+// (the per-frame record and the preview drawing: pipeline/capture/tracking_record.h).
 #pragma once
 
 #include <cstdint>
@@ -9,11 +9,11 @@
 #include <string>
 
 #include <CLI/CLI.hpp>
-#include <nlohmann/json.hpp>
 #include <opencv2/core/mat.hpp>
 
 #include "core/camera.h"
 #include "core/face_rig.h"
+#include "pipeline/capture/capture_run.h"
 #include "pipeline/capture/frame_source.h"
 #include "pipeline/capture/landmark_fit.h"
 #include "pipeline/capture/tracker.h"
@@ -45,19 +45,19 @@ CameraIntrinsics ResolveIntrinsics(const std::string& camera_path, const FrameSo
 // plus noise (issue 5), or the truth's own pose, expression weights and identity
 // (issue 17: exact geometry up to the actor's personal deviations; needs the
 // dataset's rig or a part of it, such as its tracking rig).
-class FrameTracker {
+class FrameTracker : public GlobalTracker {
  public:
   // `flags`: gt_prior / gt_fit choose a control (not both); `dataset`: the sequence
   // dataset (needed for the controls). Throws Error naming what is missing.
   FrameTracker(const FaceRig& rig, const CameraIntrinsics& intrinsics, const TrackerOptions& options,
                const TrackingFlags& flags, const std::filesystem::path& dataset);
   // Tracks `image` (linear RGB), frame number `index`.
-  TrackedFrame Track(const cv::Mat& image, int index);
+  TrackedFrame Track(const cv::Mat& image, int index) override;
   // The identity α the frames were tracked with (the truth's under the ground-truth fit).
-  Eigen::VectorXd identity() const;
+  Eigen::VectorXd identity() const override;
   // The landmark fitter (throws Error under the ground-truth fit, which has none).
   const LandmarkRigFitter& fitter() const;
-  std::string source_name() const;
+  std::string source_name() const override;
 
  private:
   const FaceRig& rig_;
@@ -69,21 +69,6 @@ class FrameTracker {
   Eigen::VectorXd truth_identity_;
   int gt_count_ = 0;
 };
-
-nlohmann::json PoseJson(const Rigid3d& pose);
-
-// The per-frame record both commands write: frame, tracked, detected, confidence,
-// landmarks (px) and, when tracked, cam_from_head, expression weights by name and rms_px.
-nlohmann::json TrackedFrameJson(const TrackedFrame& t, const FaceRig& rig);
-
-// The rig's mesh (topology, UVs) with vertices V and no normals, for writing.
-TriMesh RigMeshWithVertices(const FaceRig& rig, const MatX3d& V);
-
-// Linear float RGB → 8-bit sRGB BGR (for previews).
-cv::Mat PreviewBgr(const cv::Mat& linear_rgb);
-// Draws the landmarks (green), a faint wireframe of `projected` (#V×2 px) over the
-// face chart triangles, and the tracking state onto `bgr`.
-void DrawTracking(const TrackedFrame& t, const MatX2d& projected, const MatX3i& face_F, cv::Mat* bgr);
 
 // The rig a dataset is tracked with by default: its tracking_rig.crig when
 // dataset.json lists one (the generic rig without the parts a tracker never fits),

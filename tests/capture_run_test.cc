@@ -1,0 +1,245 @@
+// The capture run (pipeline/capture/capture_run.h; issue 18): RunCapture on a tiny
+// studio sequence (5 frames of 160×120) with a tiny detail model and a global
+// tracker that reports the truth and loses one frame writes the capture folder
+// `crease capture` writes, and its CaptureSummary counts what happened: frames,
+// tracked and lost frames, frames with D^t, the steady-state speed and its split.
+// The model is valid, not good: its wrinkle map, layout, PCA and cascade are fitted
+// to noise textures (the run's bookkeeping is under test, not the regression).
+#include "pipeline/capture/capture_run.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+#include "core/error.h"
+#include "core/json_io.h"
+#include "core/options.h"
+#include "eval/tracking_metrics.h"
+#include "pipeline/training/patches.h"
+#include "pipeline/training/wrinkle_map.h"
+#include "synth/actor.h"
+#include "synth/dataset.h"
+#include "synth/sequence.h"
+#include "tests/detail_model_test_util.h"
+#include "tests/synth_test_util.h"
+
+namespace crease {
+namespace {
+
+namespace fs = std::filesystem;
+
+const FaceRig& Rig() { return testing::ProceduralRig(); }
+
+constexpr int kR = 128;      // map resolution of the model and the session
+constexpr int kFrames = 5;   // frames of the sequence
+constexpr int kLost = 2;     // the frame the tracker loses
+
+// A valid detail model fitted to noise: uniform textures in [0.3, 0.7], Gaussian
+// displacements (σ 0.05 mm); G = 0, so the compatible rig is the rig.
+DetailModel NoiseModel() {
+  DetailModel m;
+  m.map_resolution = kR;
+  m.detail.lowpass_bandwidth_mm = 0.0;
+  m.detail.map_resolution = kR;
+  m.patch.patch_size = 8;
+  cv::RNG rng(7);
+  std::vector<cv::Mat> textures, displacements, responses;
+  WrinkleMapBuilder builder(kR, cv::Mat(), Rig().regions, m.wrinkle);
+  for (int i = 0; i < 4; ++i) {
+    cv::Mat t(kR, kR, CV_32F), d(kR, kR, CV_32F);
+    rng.fill(t, cv::RNG::UNIFORM, 0.3, 0.7);
+    rng.fill(d, cv::RNG::NORMAL, 0.0, 0.05);
+    textures.push_back(t);
+    displacements.push_back(d);
+    responses.push_back(builder.Add(t));
+  }
+  const PatchLayout layout = PlacePatches(builder.Finish(), m.patch);
+  Require(layout.num_patches() > 0, "the noise wrinkle map placed no patches");
+  testing::FitTinyRegressor(layout, textures, responses, displacements, /*pca_dimensions=*/4, /*num_ferns=*/10, &m);
+  return m;
+}
+
+// The tiny sequence dataset: frames 0–4 of the wrinkle workout, 160×120, front light.
+fs::path TinySequence() {
+  static const fs::path dir = [] {
+    const fs::path d = testing::FixtureDir("capture_run_sequence");
+    ActorOptions ao;
+    ao.resolution = 256;
+    ao.surface_min_vertices = 1000;
+    SequenceDatasetOptions o;
+    o.studio.width = 160;
+    o.studio.height = 120;
+    o.studio.samples_per_axis = 1;
+    o.studio.light = "front";
+    o.write_maps = false;
+    o.max_frames = kFrames;
+    o.tracking_parts.clear();
+    WriteSequenceDataset(Rig(), GenerateActor(Rig(), 3, ao), MakePresetSequence("wrinkle-workout"), o, d);
+    return d;
+  }();
+  return dir;
+}
+
+// A global tracker that reports the dataset's truth (eval/tracking_metrics.h) and
+// loses frame `lost`; it detects on the first frame and on the frame after a loss.
+class TruthTracker : public GlobalTracker {
+ public:
+  TruthTracker(const FaceRig& rig, fs::path dataset, int lost) : rig_(rig), dataset_(std::move(dataset)), lost_(lost) {}
+  TrackedFrame Track(const cv::Mat&, int index) override {
+    TrackedFrame t;
+    t.frame = index;
+    if (index != lost_) {
+      const FrameTruth truth = ReadFrameTruth(dataset_, index, -1);
+      if (identity_.size() == 0) identity_ = TruthIdentity(rig_, truth);
+      t = TruthAsTrackedFrame(rig_, truth, index);
+      t.detected = detect_next_;
+    }
+    detect_next_ = index == lost_;
+    return t;
+  }
+  Eigen::VectorXd identity() const override {
+    return identity_.size() ? identity_ : Eigen::VectorXd::Zero(rig_.num_identity());
+  }
+  std::string source_name() const override { return "truth"; }
+
+ private:
+  const FaceRig& rig_;
+  fs::path dataset_;
+  int lost_;
+  bool detect_next_ = true;
+  Eigen::VectorXd identity_;
+};
+
+CaptureOptions TinyCaptureOptions() {
+  CaptureOptions co;
+  co.detail.wrinkle_frames = 2;
+  co.detail.fill.fill_resolution = 64;
+  co.hifi.hifi_mesh_resolution = 64;
+  return co;
+}
+
+int CountLines(const fs::path& path) {
+  std::ifstream in(path);
+  int n = 0;
+  for (std::string line; std::getline(in, line);) ++n;
+  return n;
+}
+
+TEST(CaptureRun, WritesTheFolderAndSummarisesTheRun) {
+  const fs::path dataset = TinySequence();
+  const fs::path root = testing::FixtureDir("capture_run");
+  const DetailModel model = NoiseModel();
+  auto frames = OpenFrameSource(dataset);
+  ASSERT_TRUE(frames->info().camera.has_value());
+  const CameraIntrinsics K = frames->info().camera->intrinsics;
+  const FaceRig rig = CompatibleRig(Rig(), model);
+  TruthTracker tracker(rig, dataset, kLost);
+  CaptureSession session(rig, model, K, TinyCaptureOptions());
+
+  CaptureRunOptions run;
+  run.out = root / "cap";
+  run.preview = (root / "cap.avi").string();
+  run.mesh_every = 2;
+  run.write_textures = true;
+  run.input = dataset.string();
+  run.model_path = "noise.cdm";
+  run.source_rig = "procedural";
+  run.setup_s = 1.5;
+  const CaptureSummary s = RunCapture(run, TinyCaptureOptions(), model, K, frames.get(), &tracker, &session);
+
+  // The counts: every frame returned once and in order, one lost, D^t on the rest.
+  EXPECT_EQ(s.frames, kFrames);
+  EXPECT_EQ(s.frame_indices, (std::vector<int>{0, 1, 2, 3, 4}));
+  EXPECT_EQ(s.tracked_frames, kFrames - 1);
+  EXPECT_EQ(s.lost_frames(), 1);
+  EXPECT_EQ(s.detail_frames, kFrames - 1);
+  EXPECT_EQ(s.landmark_source, "truth");
+  EXPECT_EQ(s.wrinkle_frames, 2);
+  ASSERT_TRUE(session.layout_fixed());
+  EXPECT_EQ(s.patches, session.detail().layout().num_patches());
+  EXPECT_EQ(s.map_resolution, kR);
+  EXPECT_EQ(s.identity.size(), rig.num_identity());
+  EXPECT_DOUBLE_EQ(s.setup_s, 1.5);
+  // The speed: frames 1 and 4 are steady (not detected, not the first textured frame).
+  EXPECT_EQ(s.steady_frames, 2);
+  EXPECT_GT(s.fps, 0.0);
+  EXPECT_NEAR(s.fps * s.ms_per_frame, 1000.0, 1e-6);
+  EXPECT_NEAR(s.tracking_share + s.detail_share, 1.0, 1e-9);
+  ASSERT_FALSE(s.timing.empty());
+  EXPECT_EQ(s.timing.front().name, "global tracker: landmarks");
+  EXPECT_EQ(s.timing.front().count, kFrames - 1);
+  EXPECT_NE(s.BriefReport().find("captured 5 frames: 4 tracked, 4 with detail"), std::string::npos) << s.BriefReport();
+
+  // The folder: capture.json is the summary, a CSV row and a record per frame, D^t
+  // and T^t where tracked, meshes of the even frames only, previews, the maps.
+  EXPECT_EQ(s.out, run.out);
+  EXPECT_EQ(s.capture_json, run.out / "capture.json");
+  const nlohmann::json j = ReadJsonFile(s.capture_json);
+  EXPECT_EQ(j, nlohmann::json::parse(s.ToJson()));
+  EXPECT_EQ(j["frames"], kFrames);
+  EXPECT_EQ(j["tracked_frames"], kFrames - 1);
+  EXPECT_EQ(j["landmark_source"], "truth");
+  EXPECT_EQ(j["options"], nlohmann::json::parse(OptionsToJson(TinyCaptureOptions())));
+  EXPECT_EQ(CountLines(s.timings_csv), 1 + kFrames);
+  for (int f = 0; f < kFrames; ++f) {
+    const std::string n = fmt::format("{:06d}", f);
+    EXPECT_TRUE(fs::is_regular_file(run.out / "frames" / (n + ".json"))) << n;
+    EXPECT_TRUE(fs::is_regular_file(run.out / "frames" / (n + ".cfr"))) << n;
+    EXPECT_EQ(fs::exists(run.out / "displacement" / (n + ".exr")), f != kLost) << n;
+    EXPECT_EQ(fs::exists(run.out / "textures" / (n + ".png")), f != kLost) << n;
+    EXPECT_EQ(fs::exists(run.out / "meshes" / "hifi" / (n + ".ply")), f % 2 == 0 && f != kLost) << n;
+  }
+  EXPECT_EQ(ReadJsonFile(run.out / "frames" / "000002.json")["tracked"], false);
+  for (const char* f : {"rig.crig", "coarse.pvd", "refined.pvd", "hifi.pvd", "maps/mesoscopic.exr",
+                        "maps/wrinkle_map.exr", "maps/wrinkle_map.png", "previews/000000.png"}) {
+    EXPECT_TRUE(fs::is_regular_file(run.out / f)) << f;
+  }
+  EXPECT_GT(fs::file_size(root / "cap.avi"), 0u);
+
+  // An existing folder is not replaced without overwrite; bad options name the field.
+  EXPECT_THROW(RunCapture(run, TinyCaptureOptions(), model, K, frames.get(), &tracker, &session), Error);
+  CaptureRunOptions bad = run;
+  bad.out = root / "cap_bad";
+  bad.mesh_every = 0;
+  try {
+    RunCapture(bad, TinyCaptureOptions(), model, K, frames.get(), &tracker, &session);
+    ADD_FAILURE() << "mesh_every = 0 was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("mesh_every"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(bad.out));
+}
+
+// A source without frames is an error naming the input, and leaves no folder behind.
+TEST(CaptureRun, NoFramesIsAnError) {
+  const fs::path dataset = TinySequence();
+  const fs::path root = testing::FixtureDir("capture_run_empty");
+  const DetailModel model = NoiseModel();
+  auto frames = OpenFrameSource(dataset);
+  const CameraIntrinsics K = frames->info().camera->intrinsics;
+  const FaceRig rig = CompatibleRig(Rig(), model);
+  TruthTracker tracker(rig, dataset, -1);
+  CaptureSession session(rig, model, K, TinyCaptureOptions());
+  CaptureRunOptions run;
+  run.out = root / "cap";
+  run.max_frames = 0;
+  run.input = "the-input";
+  try {
+    RunCapture(run, TinyCaptureOptions(), model, K, frames.get(), &tracker, &session);
+    ADD_FAILURE() << "a run without frames succeeded";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("the-input: no frames"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(run.out));
+}
+
+}  // namespace
+}  // namespace crease
