@@ -4,6 +4,9 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 #include <fstream>
+#include <memory>
+#include <string>
+#include <vector>
 
 #include "apps/crease/commands.h"
 #include "core/error.h"
@@ -29,170 +32,234 @@ std::vector<fs::path> PairFiles(const std::string& list) {
   return files;
 }
 
+// train
+struct TrainArgs {
+  std::string scans, rig_path, out, config, report, pairs_in, pairs_out;
+  std::vector<std::string> sets;
+};
+
+// --config, then --set, onto `options`.
+void ApplyUserOptions(const TrainArgs& a, TrainingOptions* options) {
+  if (!a.config.empty()) SetOptionsFromYaml(ReadFileToString(a.config), a.config, options);
+  if (!a.sets.empty()) SetOptionsFromJson(SetPairsToJson(a.sets), "--set", options);
+}
+
+// The report folder: --report, else <out without extension>_report.
+fs::path ReportDir(const TrainArgs& a) {
+  const fs::path out_path(a.out.empty() ? a.pairs_out : a.out);
+  return a.report.empty() ? out_path.parent_path() / (out_path.stem().string() + "_report") : fs::path(a.report);
+}
+
+void WriteTrainingReport(const fs::path& report_dir, const TrainingSummary& summary) {
+  WriteFileAtomic(report_dir / "report.json", [&](std::ostream& o) { o << summary.ToJson(); });
+  const std::string md = summary.ToMarkdown();
+  WriteFileAtomic(report_dir / "report.md", [&](std::ostream& o) { o << md; });
+  std::printf("\n%s\n", md.c_str());
+}
+
+void PrintProgressLine(const std::string& l) { std::printf("  %s\n", l.c_str()); }
+
+// train --pairs: the PCA and the cascade (Sec. 4.3) from saved pairs.
+void TrainFromPairs(const TrainArgs& a) {
+  const fs::path report_dir = ReportDir(a);
+  const TrainingPairs pairs = ReadTrainingPairs(PairFiles(a.pairs_in));
+  const TrainingOptions options =
+      OptionsForPairs(pairs, a.pairs_in, [&a](TrainingOptions* o) { ApplyUserOptions(a, o); });
+  std::printf("training the PCA and the cascade on %lld pairs of %s\n", static_cast<long long>(pairs.texture.rows()),
+              a.pairs_in.c_str());
+  TrainingSummary summary;
+  const DetailModel model = TrainDetailModelFromPairs(pairs, options, {report_dir}, &summary, PrintProgressLine);
+  WriteDetailModel(a.out.empty() ? a.pairs_out : a.out, model);
+  WriteTrainingReport(report_dir, summary);
+  std::printf("wrote %s and the report in %s\n", a.out.c_str(), report_dir.string().c_str());
+}
+
+// train --scans: extraction (Sec. 4.1–4.2), then the PCA and the cascade unless only pairs are asked for.
+void TrainFromScans(TrainArgs& a) {
+  const fs::path report_dir = ReportDir(a);
+  TrainingOptions options;
+  ApplyUserOptions(a, &options);
+  const ScanSet set = ReadScanSet(a.scans);
+  if (a.rig_path.empty()) {
+    Require(!set.rig.empty(), fmt::format("{}: the scan set names no rig; give --rig", a.scans));
+    a.rig_path = set.rig.string();
+  }
+  const FaceRig rig = ReadRig(a.rig_path);
+  std::printf("training on %s: %zu actors, %d scans, lights: %s\n", a.scans.c_str(), set.actors.size(),
+              set.num_scans(), fmt::format("{}", fmt::join(set.lights(), ", ")).c_str());
+  TrainingSummary summary;
+  const TrainingPairs pairs = ExtractTrainingPairs(set, rig, options, {report_dir}, &summary, PrintProgressLine);
+  if (!a.pairs_out.empty()) {
+    WriteTrainingPairs(a.pairs_out, pairs);
+    std::printf("wrote %lld training pairs to %s\n", static_cast<long long>(pairs.texture.rows()),
+                a.pairs_out.c_str());
+  }
+  if (a.out.empty()) {
+    WriteTrainingReport(report_dir, summary);
+    return;
+  }
+  const DetailModel model = TrainDetailModelFromPairs(pairs, options, {report_dir}, &summary, PrintProgressLine);
+  WriteDetailModel(a.out, model);
+  // The compatible rig (Sec. 4.1) for inspection; capture derives it from the model's G.
+  WriteRig(report_dir / "compatible_rig.crig", MakeRigCompatible(rig, model.detail));
+  WriteTrainingReport(report_dir, summary);
+  std::printf("wrote %s and the report in %s\n", a.out.c_str(), report_dir.string().c_str());
+}
+
+void AddTrainCommand(CLI::App& app) {
+  auto* cmd = app.add_subcommand("train", "Train the detail model (paper Sec. 4) on a scan set");
+  auto a = std::make_shared<TrainArgs>();
+  auto* scans_opt = cmd->add_option("--scans", a->scans, "Scan set folder (scans.json; e.g. from `crease synth scans`)");
+  auto* pairs_opt = cmd->add_option("--pairs", a->pairs_in,
+                                    "Train the PCA and the cascade (Sec. 4.3) from saved training pairs instead of "
+                                    "scans (several files: comma-separated); only PCA and cascade options may then "
+                                    "change");
+  scans_opt->excludes(pairs_opt);
+  cmd->add_option("--save-pairs", a->pairs_out,
+                  "Also save the training pairs (t_i, d_i of Sec. 4.2; CREASPRS file); without --out, stop there");
+  cmd->add_option("--rig", a->rig_path, "The tracker's rig (.crig); default: the rig the scan set names");
+  cmd->add_option("--out,-o", a->out, "Model file to write (.cdm)");
+  cmd->add_option("--config", a->config, "Training options (YAML; keys: pipeline/training/trainer.h TrainingOptions)");
+  cmd->add_option("--set", a->sets, "Training option KEY=VALUE (repeatable), e.g. num_ferns=640 dimensions=8");
+  cmd->add_option("--report", a->report, "Report folder (default: <out without extension>_report)");
+  cmd->callback([a] {
+    if (a->scans.empty() == a->pairs_in.empty()) throw Error("train: give --scans (a scan set) or --pairs (saved pairs)");
+    if (a->out.empty() && a->pairs_out.empty()) throw Error("train: give --out (the model) and/or --save-pairs");
+    Require(a->pairs_in.empty() || a->pairs_out.empty(), "train: --save-pairs needs --scans");
+    if (!a->pairs_in.empty()) {
+      TrainFromPairs(*a);
+    } else {
+      TrainFromScans(*a);
+    }
+  });
+}
+
+// eval-extraction
+struct EvalExtractionArgs {
+  std::string scans, config, json_out;
+  std::vector<std::string> sets;
+  int actors = 0;
+};
+
+void RunEvalExtraction(const EvalExtractionArgs& a) {
+  TrainingOptions training;
+  if (!a.config.empty()) SetOptionsFromYaml(ReadFileToString(a.config), a.config, &training);
+  if (!a.sets.empty()) SetOptionsFromJson(SetPairsToJson(a.sets), "--set", &training);
+  ExtractionTruthOptions o;
+  o.detail = training.detail;
+  o.band_mm = training.validation_band_mm;
+  o.max_actors = a.actors;
+  const ExtractionTruthReport r = EvaluateExtraction(a.scans, o);
+  std::printf("%s%zu scans in %.1f s\n", r.ToTable().c_str(), r.rows.size(), r.seconds);
+  if (!a.json_out.empty()) WriteFileAtomic(a.json_out, [&](std::ostream& out) { out << r.ToJson() << "\n"; });
+}
+
+void AddEvalExtractionCommand(CLI::App& app) {
+  auto* cmd = app.add_subcommand("eval-extraction",
+                                 "Detail extraction (Sec. 4.1) of a studio scan set against the truth: the wrinkle "
+                                 "layer alone and with the coarse expression's medium band (eval/detail_truth.h)");
+  auto a = std::make_shared<EvalExtractionArgs>();
+  cmd->add_option("--scans", a->scans, "Scan set folder from `crease synth scans`")->required();
+  cmd->add_option("--config", a->config, "Training options (YAML; the detail extraction's and validation_band_mm are used)");
+  cmd->add_option("--set", a->sets, "Training option KEY=VALUE (repeatable), e.g. lowpass_bandwidth_mm=2");
+  cmd->add_option("--actors", a->actors, "Evaluate the first N actors only (0 = all)")->capture_default_str();
+  cmd->add_option("--json", a->json_out, "Write the rows as JSON");
+  cmd->callback([a] { RunEvalExtraction(*a); });
+}
+
+// truth-maps
+struct TruthMapsArgs {
+  std::string dataset, model_path, out;
+  int frames = -1;
+};
+
+void AddTruthMapsCommand(CLI::App& app) {
+  auto* cmd = app.add_subcommand("truth-maps",
+                                 "The true detail D* (Sec. 4.1, eval/detail_truth.h) of a studio sequence's frames, "
+                                 "with a model's G: the maps `capture --set wrinkle_map_from_maps=DIR` reads");
+  auto a = std::make_shared<TruthMapsArgs>();
+  cmd->add_option("--dataset,-d", a->dataset, "Sequence folder from `crease synth sequence`")->required();
+  cmd->add_option("--model,-m", a->model_path, "Detail model (.cdm): its G and map resolution")->required();
+  cmd->add_option("--frames", a->frames, "The first N frames only (-1 = all)")->capture_default_str();
+  cmd->add_option("--out,-o", a->out, "Folder to write NNNNNN.exr into (replaced)")->required();
+  cmd->callback([a] {
+    const DetailModel model = ReadDetailModel(a->model_path);
+    const int n = WriteDetailTruthMaps(a->dataset, model.detail, a->frames, a->out);
+    std::printf("wrote %d maps of D* (%d x %d) to %s\n", n, model.detail.map_resolution, model.detail.map_resolution,
+                a->out.c_str());
+  });
+}
+
+// model eval-pairs
+struct EvalPairsArgs {
+  std::string model, pairs, json;
+};
+
+void AddModelEvalPairsCommand(CLI::App* model_cmd) {
+  auto* cmd = model_cmd->add_subcommand(
+      "eval-pairs", "The model's patch regression (Sec. 4.3) on training pairs, seen or held out (issue 17's rung R0)");
+  auto a = std::make_shared<EvalPairsArgs>();
+  cmd->add_option("model", a->model, "Detail model file")->required();
+  cmd->add_option("--pairs", a->pairs, "Pair files (from `crease train --save-pairs`), comma-separated")->required();
+  cmd->add_option("--json", a->json, "Write the metrics as JSON");
+  cmd->callback([a] {
+    const PairRegressionMetrics m =
+        EvaluatePairs(ReadDetailModel(a->model), ReadTrainingPairs(PairFiles(a->pairs)), a->pairs);
+    std::printf("%s", m.ToTable().c_str());
+    if (!a->json.empty()) WriteFileAtomic(a->json, [&](std::ostream& out) { out << m.ToJson() << "\n"; });
+  });
+}
+
+// model loao
+struct LoaoArgs {
+  std::string pairs, json, config, regressors = "ferns,ridge,nearest";
+  std::vector<std::string> sets;
+};
+
+void RunLoao(const LoaoArgs& a) {
+  const TrainingPairs pairs = ReadTrainingPairs(PairFiles(a.pairs));
+  const TrainingOptions options = OptionsForPairs(pairs, a.pairs, [&a](TrainingOptions* o) {
+    if (!a.config.empty()) SetOptionsFromYaml(ReadFileToString(a.config), a.config, o);
+    if (!a.sets.empty()) SetOptionsFromJson(SetPairsToJson(a.sets), "--set", o);
+  });
+  const LeaveOneActorOutResult r =
+      EvaluateLeaveOneActorOut(pairs, options, SplitComma(a.regressors), a.pairs, PrintProgressLine);
+  std::printf("%s", r.ToTable().c_str());
+  if (!a.json.empty()) WriteFileAtomic(a.json, [&](std::ostream& out) { out << r.ToJson() << "\n"; });
+}
+
+void AddModelLoaoCommand(CLI::App* model_cmd) {
+  auto* cmd = model_cmd->add_subcommand(
+      "loao", "Leave one actor out (issue 17's rung R0): train on all actors' pairs but one, score the held-out one");
+  auto a = std::make_shared<LoaoArgs>();
+  cmd->add_option("--pairs", a->pairs, "Pair files (from `crease train --save-pairs`), comma-separated")->required();
+  cmd->add_option("--regressors", a->regressors, "Regressors scored, comma-separated: ferns, ridge, nearest")
+      ->capture_default_str();
+  cmd->add_option("--config", a->config, "Training options (YAML; only PCA and cascade options may differ)");
+  cmd->add_option("--set", a->sets, "Training option KEY=VALUE (repeatable), e.g. num_ferns=640");
+  cmd->add_option("--json", a->json, "Write the folds and their means as JSON");
+  cmd->callback([a] { RunLoao(*a); });
+}
+
+// model info | eval-pairs | loao
+void AddModelCommands(CLI::App& app) {
+  auto* model_cmd = app.add_subcommand("model", "Inspect trained models");
+  model_cmd->require_subcommand(1);
+  auto* cmd = model_cmd->add_subcommand("info", "Describe a detail model file");
+  auto path = std::make_shared<std::string>();
+  cmd->add_option("model", *path, "Detail model file")->required();
+  cmd->callback([path] { std::printf("%s", DescribeDetailModel(ReadDetailModel(*path)).c_str()); });
+  AddModelEvalPairsCommand(model_cmd);
+  AddModelLoaoCommand(model_cmd);
+}
+
 }  // namespace
 
 void AddTrainCommands(CLI::App& app) {
-  {
-    auto* cmd = app.add_subcommand("train", "Train the detail model (paper Sec. 4) on a scan set");
-    static std::string scans, rig_path, out, config, report, pairs_in, pairs_out;
-    static std::vector<std::string> sets;
-    auto* scans_opt = cmd->add_option("--scans", scans, "Scan set folder (scans.json; e.g. from `crease synth scans`)");
-    auto* pairs_opt = cmd->add_option("--pairs", pairs_in,
-                                      "Train the PCA and the cascade (Sec. 4.3) from saved training pairs instead of "
-                                      "scans (several files: comma-separated); only PCA and cascade options may then "
-                                      "change");
-    scans_opt->excludes(pairs_opt);
-    cmd->add_option("--save-pairs", pairs_out,
-                    "Also save the training pairs (t_i, d_i of Sec. 4.2; CREASPRS file); without --out, stop there");
-    cmd->add_option("--rig", rig_path, "The tracker's rig (.crig); default: the rig the scan set names");
-    cmd->add_option("--out,-o", out, "Model file to write (.cdm)");
-    cmd->add_option("--config", config, "Training options (YAML; keys: pipeline/training/trainer.h TrainingOptions)");
-    cmd->add_option("--set", sets, "Training option KEY=VALUE (repeatable), e.g. num_ferns=640 dimensions=8");
-    cmd->add_option("--report", report, "Report folder (default: <out without extension>_report)");
-    cmd->callback([] {
-      if (scans.empty() == pairs_in.empty()) throw Error("train: give --scans (a scan set) or --pairs (saved pairs)");
-      if (out.empty() && pairs_out.empty()) throw Error("train: give --out (the model) and/or --save-pairs");
-      Require(pairs_in.empty() || pairs_out.empty(), "train: --save-pairs needs --scans");
-      auto apply_user_options = [](TrainingOptions* options) {
-        if (!config.empty()) SetOptionsFromYaml(ReadFileToString(config), config, options);
-        if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", options);
-      };
-      const fs::path out_path(out.empty() ? pairs_out : out);
-      const fs::path report_dir =
-          report.empty() ? out_path.parent_path() / (out_path.stem().string() + "_report") : fs::path(report);
-      auto write_report = [&](const TrainingSummary& summary) {
-        WriteFileAtomic(report_dir / "report.json", [&](std::ostream& o) { o << summary.ToJson(); });
-        const std::string md = summary.ToMarkdown();
-        WriteFileAtomic(report_dir / "report.md", [&](std::ostream& o) { o << md; });
-        std::printf("\n%s\n", md.c_str());
-      };
-      auto line = [](const std::string& l) { std::printf("  %s\n", l.c_str()); };
-      if (!pairs_in.empty()) {
-        const TrainingPairs pairs = ReadTrainingPairs(PairFiles(pairs_in));
-        const TrainingOptions options = OptionsForPairs(pairs, pairs_in, apply_user_options);
-        std::printf("training the PCA and the cascade on %lld pairs of %s\n", static_cast<long long>(pairs.texture.rows()),
-                    pairs_in.c_str());
-        TrainingSummary summary;
-        const DetailModel model = TrainDetailModelFromPairs(pairs, options, {report_dir}, &summary, line);
-        WriteDetailModel(out_path, model);
-        write_report(summary);
-        std::printf("wrote %s and the report in %s\n", out.c_str(), report_dir.string().c_str());
-        return;
-      }
-      TrainingOptions options;
-      apply_user_options(&options);
-      const ScanSet set = ReadScanSet(scans);
-      if (rig_path.empty()) {
-        Require(!set.rig.empty(), fmt::format("{}: the scan set names no rig; give --rig", scans));
-        rig_path = set.rig.string();
-      }
-      const FaceRig rig = ReadRig(rig_path);
-      std::printf("training on %s: %zu actors, %d scans, lights: %s\n", scans.c_str(), set.actors.size(),
-                  set.num_scans(), fmt::format("{}", fmt::join(set.lights(), ", ")).c_str());
-      TrainingSummary summary;
-      const TrainingPairs pairs = ExtractTrainingPairs(set, rig, options, {report_dir}, &summary, line);
-      if (!pairs_out.empty()) {
-        WriteTrainingPairs(pairs_out, pairs);
-        std::printf("wrote %lld training pairs to %s\n", static_cast<long long>(pairs.texture.rows()),
-                    pairs_out.c_str());
-      }
-      if (out.empty()) {
-        write_report(summary);
-        return;
-      }
-      const DetailModel model = TrainDetailModelFromPairs(pairs, options, {report_dir}, &summary, line);
-      WriteDetailModel(out_path, model);
-      // The compatible rig (Sec. 4.1) for inspection; capture derives it from the model's G.
-      WriteRig(report_dir / "compatible_rig.crig", MakeRigCompatible(rig, model.detail));
-      write_report(summary);
-      std::printf("wrote %s and the report in %s\n", out.c_str(), report_dir.string().c_str());
-    });
-  }
-  {
-    auto* cmd = app.add_subcommand("eval-extraction",
-                                   "Detail extraction (Sec. 4.1) of a studio scan set against the truth: the wrinkle "
-                                   "layer alone and with the coarse expression's medium band (eval/detail_truth.h)");
-    static std::string scans, config, json_out;
-    static std::vector<std::string> sets;
-    static int actors = 0;
-    cmd->add_option("--scans", scans, "Scan set folder from `crease synth scans`")->required();
-    cmd->add_option("--config", config, "Training options (YAML; the detail extraction's and validation_band_mm are used)");
-    cmd->add_option("--set", sets, "Training option KEY=VALUE (repeatable), e.g. lowpass_bandwidth_mm=2");
-    cmd->add_option("--actors", actors, "Evaluate the first N actors only (0 = all)")->capture_default_str();
-    cmd->add_option("--json", json_out, "Write the rows as JSON");
-    cmd->callback([] {
-      TrainingOptions training;
-      if (!config.empty()) SetOptionsFromYaml(ReadFileToString(config), config, &training);
-      if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &training);
-      ExtractionTruthOptions o;
-      o.detail = training.detail;
-      o.band_mm = training.validation_band_mm;
-      o.max_actors = actors;
-      const ExtractionTruthReport r = EvaluateExtraction(scans, o);
-      std::printf("%s%zu scans in %.1f s\n", r.ToTable().c_str(), r.rows.size(), r.seconds);
-      if (!json_out.empty()) WriteFileAtomic(json_out, [&](std::ostream& out) { out << r.ToJson() << "\n"; });
-    });
-  }
-  {
-    auto* cmd = app.add_subcommand("truth-maps",
-                                   "The true detail D* (Sec. 4.1, eval/detail_truth.h) of a studio sequence's frames, "
-                                   "with a model's G: the maps `capture --set wrinkle_map_from_maps=DIR` reads");
-    static std::string dataset, model_path, out;
-    static int frames = -1;
-    cmd->add_option("--dataset,-d", dataset, "Sequence folder from `crease synth sequence`")->required();
-    cmd->add_option("--model,-m", model_path, "Detail model (.cdm): its G and map resolution")->required();
-    cmd->add_option("--frames", frames, "The first N frames only (-1 = all)")->capture_default_str();
-    cmd->add_option("--out,-o", out, "Folder to write NNNNNN.exr into (replaced)")->required();
-    cmd->callback([] {
-      const DetailModel model = ReadDetailModel(model_path);
-      const int n = WriteDetailTruthMaps(dataset, model.detail, frames, out);
-      std::printf("wrote %d maps of D* (%d x %d) to %s\n", n, model.detail.map_resolution, model.detail.map_resolution,
-                  out.c_str());
-    });
-  }
-  {
-    auto* model_cmd = app.add_subcommand("model", "Inspect trained models");
-    model_cmd->require_subcommand(1);
-    auto* cmd = model_cmd->add_subcommand("info", "Describe a detail model file");
-    static std::string path;
-    cmd->add_option("model", path, "Detail model file")->required();
-    cmd->callback([] { std::printf("%s", DescribeDetailModel(ReadDetailModel(path)).c_str()); });
-    auto* eval_cmd = model_cmd->add_subcommand(
-        "eval-pairs", "The model's patch regression (Sec. 4.3) on training pairs, seen or held out (issue 17's rung R0)");
-    static std::string eval_model, eval_pairs, eval_json;
-    eval_cmd->add_option("model", eval_model, "Detail model file")->required();
-    eval_cmd->add_option("--pairs", eval_pairs, "Pair files (from `crease train --save-pairs`), comma-separated")
-        ->required();
-    eval_cmd->add_option("--json", eval_json, "Write the metrics as JSON");
-    eval_cmd->callback([] {
-      const PairRegressionMetrics m =
-          EvaluatePairs(ReadDetailModel(eval_model), ReadTrainingPairs(PairFiles(eval_pairs)), eval_pairs);
-      std::printf("%s", m.ToTable().c_str());
-      if (!eval_json.empty()) WriteFileAtomic(eval_json, [&](std::ostream& out) { out << m.ToJson() << "\n"; });
-    });
-    auto* loao_cmd = model_cmd->add_subcommand(
-        "loao", "Leave one actor out (issue 17's rung R0): train on all actors' pairs but one, score the held-out one");
-    static std::string loao_pairs, loao_json, loao_config, loao_regressors = "ferns,ridge,nearest";
-    static std::vector<std::string> loao_sets;
-    loao_cmd->add_option("--pairs", loao_pairs, "Pair files (from `crease train --save-pairs`), comma-separated")
-        ->required();
-    loao_cmd->add_option("--regressors", loao_regressors, "Regressors scored, comma-separated: ferns, ridge, nearest")
-        ->capture_default_str();
-    loao_cmd->add_option("--config", loao_config, "Training options (YAML; only PCA and cascade options may differ)");
-    loao_cmd->add_option("--set", loao_sets, "Training option KEY=VALUE (repeatable), e.g. num_ferns=640");
-    loao_cmd->add_option("--json", loao_json, "Write the folds and their means as JSON");
-    loao_cmd->callback([] {
-      const TrainingPairs pairs = ReadTrainingPairs(PairFiles(loao_pairs));
-      const TrainingOptions options = OptionsForPairs(pairs, loao_pairs, [](TrainingOptions* o) {
-        if (!loao_config.empty()) SetOptionsFromYaml(ReadFileToString(loao_config), loao_config, o);
-        if (!loao_sets.empty()) SetOptionsFromJson(SetPairsToJson(loao_sets), "--set", o);
-      });
-      const LeaveOneActorOutResult r = EvaluateLeaveOneActorOut(
-          pairs, options, SplitComma(loao_regressors), loao_pairs, [](const std::string& l) { std::printf("  %s\n", l.c_str()); });
-      std::printf("%s", r.ToTable().c_str());
-      if (!loao_json.empty()) WriteFileAtomic(loao_json, [&](std::ostream& out) { out << r.ToJson() << "\n"; });
-    });
-  }
+  AddTrainCommand(app);
+  AddEvalExtractionCommand(app);
+  AddTruthMapsCommand(app);
+  AddModelCommands(app);
 }
 
 }  // namespace crease::app
