@@ -657,21 +657,32 @@ struct ExpressionDef {
   std::function<void(LidState&)> lids;                                // may be empty
 };
 
-}  // namespace
+using VI = VertexInfo;
 
-FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
-  options.Check();
-  HeadModel head;
-  head.grid = MakeGrid(options);
-  head.hair_mm = options.hair_thickness_mm;
+// ---------------------------------------------------------------------------
+// The head's meshes.
+
+// Vertex ids of the head grid's nodes (-1 = none): the face vertex (on a slit,
+// the upper rim), the lower rim vertex of a slit node, and the scalp vertex.
+struct GridNodes {
+  int cols = 0;
+  std::vector<int> face, lower, skull;
+
+  size_t Node(int r, int c) const { return static_cast<size_t>(r) * cols + c; }
+  int Face(int r, int c) const { return face[Node(r, c)]; }
+  int Lower(int r, int c) const { return lower[Node(r, c)]; }
+};
+
+// The head grid: face, cranium, hair and neck, at the neutral's positions; UVs
+// on the scalp's tile (the face chart replaces them for the face).
+GridNodes AddHeadGrid(const HeadModel& head, Builder& b) {
   const Grid& g = head.grid;
-  Builder b;
-
-  // --- The head grid: face, cranium, hair and neck. ---------------------------
   const int R = g.rows(), C = g.cols();
-  std::vector<int> face_id(static_cast<size_t>(R) * C, -1), skull_id(static_cast<size_t>(R) * C, -1),
-      lower_id(static_cast<size_t>(R) * C, -1);
-  auto node = [&](int r, int c) { return static_cast<size_t>(r) * C + c; };
+  GridNodes nodes;
+  nodes.cols = C;
+  nodes.face.assign(static_cast<size_t>(R) * C, -1);
+  nodes.skull.assign(static_cast<size_t>(R) * C, -1);
+  nodes.lower.assign(static_cast<size_t>(R) * C, -1);
   // Hair above the hairline; the rest of the scalp is split into cranium and neck
   // once positions are known.
   auto skull_part = [&](int r, int c) {
@@ -680,8 +691,8 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
   auto vertex = [&](int r, int c, bool face, bool lower) {
     if (r == 0) c = 0;  // poles: one vertex each
     if (r == R - 1) c = 0;
-    std::vector<int>& ids = face ? (lower ? lower_id : face_id) : skull_id;
-    int& id = ids[node(r, c)];
+    std::vector<int>& ids = face ? (lower ? nodes.lower : nodes.face) : nodes.skull;
+    int& id = ids[nodes.Node(r, c)];
     if (id < 0) {
       VertexInfo vi;
       vi.grid = true;
@@ -727,250 +738,303 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
     const double psi = NodePsi(g, b.info[v].r, b.info[v].c), phi = g.phi[b.info[v].c];
     b.UV[v] = Vector2d(1.0 + (phi + 180.0) / 360.0, (90.0 - psi) / 180.0);  // replaced below for the face
   }
+  return nodes;
+}
 
-  // --- Eyeballs: pupil disc, iris annulus, sclera; the left one, then mirrored. --
+// Eyeballs: pupil disc, iris annulus, sclera; the left one, then mirrored.
+void AddEyeballs(const ProceduralRigOptions& options, Builder& b) {
   constexpr double kPupilDeg = 10.0, kIrisDeg = 30.0;  // half-angles: ~2 mm pupil, ~6 mm iris radius
-  {
-    const int first = static_cast<int>(b.V.size()), first_tri = static_cast<int>(b.F.size());
-    const int segs = options.eyeball_segments;
-    auto place = [&](const Vector3d& s) { return Vector3d(kEyeCentre + kEyeballRadius * s); };
-    VertexInfo vi;
-    vi.part = kPupilL;
-    AddSphereBand(b, 0.0, kPupilDeg, 2, segs, place, vi, {2.0, 0.0}, {0.5, kPupilDeg / 180.0});
-    vi.part = kIrisL;
-    AddSphereBand(b, kPupilDeg, kIrisDeg, 4, segs, place, vi, {2.0, kPupilDeg / 180.0},
-                  {0.5, (kIrisDeg - kPupilDeg) / 180.0});
-    vi.part = kEyeballL;
-    AddSphereBand(b, kIrisDeg, 180.0, std::max(8, segs / 3), segs, place, vi, {2.0, kIrisDeg / 180.0},
-                  {0.5, (180.0 - kIrisDeg) / 180.0});
-    AddMirrored(b, first, first_tri, [](int p) { return p + 1; }, {0.5, 0.0});  // *_left → *_right
-  }
+  const int first = static_cast<int>(b.V.size()), first_tri = static_cast<int>(b.F.size());
+  const int segs = options.eyeball_segments;
+  auto place = [&](const Vector3d& s) { return Vector3d(kEyeCentre + kEyeballRadius * s); };
+  VertexInfo vi;
+  vi.part = kPupilL;
+  AddSphereBand(b, 0.0, kPupilDeg, 2, segs, place, vi, {2.0, 0.0}, {0.5, kPupilDeg / 180.0});
+  vi.part = kIrisL;
+  AddSphereBand(b, kPupilDeg, kIrisDeg, 4, segs, place, vi, {2.0, kPupilDeg / 180.0},
+                {0.5, (kIrisDeg - kPupilDeg) / 180.0});
+  vi.part = kEyeballL;
+  AddSphereBand(b, kIrisDeg, 180.0, std::max(8, segs / 3), segs, place, vi, {2.0, kIrisDeg / 180.0},
+                {0.5, (180.0 - kIrisDeg) / 180.0});
+  AddMirrored(b, first, first_tri, [](int p) { return p + 1; }, {0.5, 0.0});  // *_left → *_right
+}
 
-  // --- Ears: flattened ellipsoids with a concha, leaning back, the back edge flared. --
-  {
-    const int first = static_cast<int>(b.V.size()), first_tri = static_cast<int>(b.F.size());
-    const Vector3d radii(5.0, 31.0, 16.0), centre(71.0, -14.0, -13.0);
-    const Eigen::Matrix3d rot = (Eigen::AngleAxisd(-26.0 * kDeg, Vector3d::UnitY()) *
-                                 Eigen::AngleAxisd(-15.0 * kDeg, Vector3d::UnitX()))
-                                    .toRotationMatrix();
-    // Unit sphere with its poles along the ear's local x (outwards).
-    auto place = [&](const Vector3d& s) {
-      Vector3d l(s.z() * radii.x(), s.y() * radii.y(), s.x() * radii.z());  // local: x out, y up, z forward
-      if (s.z() > 0.0) {
-        // Concha: a dip in the outer face, low and forward; a raised rim (helix)
-        // around the upper and back edge; a thicker lobe at the bottom.
-        const double dip = 5.0 * std::exp(-0.5 * (std::pow((l.y() + 6.0) / 9.0, 2) + std::pow((l.z() - 1.0) / 6.0, 2)));
-        const double rim_t = std::sqrt(s.x() * s.x() + s.y() * s.y());
-        const double helix = 3.0 * Gauss(rim_t, 0.9, 0.09) * Smoothstep(-0.6, 0.2, s.y() - 0.5 * s.x());
-        const double lobe = 2.0 * Gauss(s.y(), -0.85, 0.15);
-        l.x() += -dip + helix + lobe;
-      }
-      return Vector3d(centre + rot * l);
-    };
-    VertexInfo vi;
-    vi.part = kEars;
-    AddSphereBand(b, 0.0, 180.0, 14, 24, place, vi, {3.0, 0.0}, {0.5, 1.0});
-    AddMirrored(b, first, first_tri, [](int p) { return p; }, {0.5, 0.0});
-  }
+// Ears: flattened ellipsoids with a concha, leaning back, the back edge flared.
+void AddEars(Builder& b) {
+  const int first = static_cast<int>(b.V.size()), first_tri = static_cast<int>(b.F.size());
+  const Vector3d radii(5.0, 31.0, 16.0), centre(71.0, -14.0, -13.0);
+  const Eigen::Matrix3d rot = (Eigen::AngleAxisd(-26.0 * kDeg, Vector3d::UnitY()) *
+                               Eigen::AngleAxisd(-15.0 * kDeg, Vector3d::UnitX()))
+                                  .toRotationMatrix();
+  // Unit sphere with its poles along the ear's local x (outwards).
+  auto place = [&](const Vector3d& s) {
+    Vector3d l(s.z() * radii.x(), s.y() * radii.y(), s.x() * radii.z());  // local: x out, y up, z forward
+    if (s.z() > 0.0) {
+      // Concha: a dip in the outer face, low and forward; a raised rim (helix)
+      // around the upper and back edge; a thicker lobe at the bottom.
+      const double dip = 5.0 * std::exp(-0.5 * (std::pow((l.y() + 6.0) / 9.0, 2) + std::pow((l.z() - 1.0) / 6.0, 2)));
+      const double rim_t = std::sqrt(s.x() * s.x() + s.y() * s.y());
+      const double helix = 3.0 * Gauss(rim_t, 0.9, 0.09) * Smoothstep(-0.6, 0.2, s.y() - 0.5 * s.x());
+      const double lobe = 2.0 * Gauss(s.y(), -0.85, 0.15);
+      l.x() += -dip + helix + lobe;
+    }
+    return Vector3d(centre + rot * l);
+  };
+  VertexInfo vi;
+  vi.part = kEars;
+  AddSphereBand(b, 0.0, 180.0, 14, 24, place, vi, {3.0, 0.0}, {0.5, 1.0});
+  AddMirrored(b, first, first_tri, [](int p) { return p; }, {0.5, 0.0});
+}
 
-  // --- Mouth cavity: a closed bag behind the lips, facing inwards. --------------
-  {
-    const int first_tri = static_cast<int>(b.F.size());
-    const Vector3d radii(21.0, 14.0, 18.0), centre(0.0, -77.0, 57.0);
-    auto place = [&](const Vector3d& s) { return Vector3d(centre + radii.cwiseProduct(Vector3d(s.x(), s.y(), s.z()))); };
-    VertexInfo vi;
-    vi.part = kMouthCavity;
-    AddSphereBand(b, 0.0, 180.0, 10, 20, place, vi, {4.0, 0.0}, {1.0, 1.0});
-    for (size_t f = first_tri; f < b.F.size(); ++f) std::swap(b.F[f][1], b.F[f][2]);
-  }
+// Mouth cavity: a closed bag behind the lips, facing inwards.
+void AddMouthCavity(Builder& b) {
+  const int first_tri = static_cast<int>(b.F.size());
+  const Vector3d radii(21.0, 14.0, 18.0), centre(0.0, -77.0, 57.0);
+  auto place = [&](const Vector3d& s) { return Vector3d(centre + radii.cwiseProduct(Vector3d(s.x(), s.y(), s.z()))); };
+  VertexInfo vi;
+  vi.part = kMouthCavity;
+  AddSphereBand(b, 0.0, 180.0, 10, 20, place, vi, {4.0, 0.0}, {1.0, 1.0});
+  for (size_t f = first_tri; f < b.F.size(); ++f) std::swap(b.F[f][1], b.F[f][2]);
+}
 
-  // --- Teeth: two arches (upper and lower incisors to premolars) as closed
-  // swept boxes between the lips and the cavity; the lower one follows the jaw. --
-  {
-    constexpr int kSegments = 16;
-    constexpr double kHalfAngle = 1.15;              // radians of the arch on each side
-    const double ax = 21.0, az = 17.0, zc = 62.5;  // arch half-width, depth, centre (mm)
-    for (int jaw = 0; jaw < 2; ++jaw) {
-      // The upper incisors reach ~3 mm below the stomion, the lower ones sit behind them.
-      const double y_top = jaw == 0 ? -67.0 : -77.5, y_bottom = jaw == 0 ? -78.5 : -87.0;
-      const double zj = jaw == 0 ? zc : zc - 3.0;
-      const double thick = 3.5;
-      VertexInfo vi;
-      vi.part = jaw == 0 ? kTeethUpper : kTeethLower;
-      std::vector<std::array<int, 4>> sec;
-      std::vector<Vector3d> out_n;
-      for (int i = 0; i <= kSegments; ++i) {
-        const double t = kHalfAngle * (2 * i - kSegments) / kSegments;  // exact ±t pairs
-        const Vector3d c(ax * std::sin(t), 0.0, zj + az * std::cos(t));
-        const Vector3d n = Vector3d(std::sin(t) / ax, 0.0, std::cos(t) / az).normalized();
-        std::array<int, 4> ids;
-        const Vector3d corners[4] = {c + 0.5 * thick * n + Vector3d(0, y_top, 0), c + 0.5 * thick * n + Vector3d(0, y_bottom, 0),
-                                     c - 0.5 * thick * n + Vector3d(0, y_bottom, 0), c - 0.5 * thick * n + Vector3d(0, y_top, 0)};
-        for (int k = 0; k < 4; ++k) {
-          ids[k] = b.Add(corners[k], Vector2d(5.0 + 0.5 * jaw + 0.5 * i / kSegments, 0.25 * k), vi);
-        }
-        sec.push_back(ids);
-        out_n.push_back(n);
-      }
-      auto quad = [&](int a, int bb, int c, int d, const Vector3d& outward) {
-        for (const Eigen::Vector3i& t : {Eigen::Vector3i(a, bb, c), Eigen::Vector3i(a, c, d)}) {
-          const Vector3d nrm = (b.V[t[1]] - b.V[t[0]]).cross(b.V[t[2]] - b.V[t[0]]);
-          b.F.push_back(nrm.dot(outward) >= 0.0 ? t : Eigen::Vector3i(t[0], t[2], t[1]));
-        }
-      };
-      for (int i = 0; i < kSegments; ++i) {
-        const auto& A = sec[i];
-        const auto& B = sec[i + 1];
-        const Vector3d n = (out_n[i] + out_n[i + 1]).normalized();
-        quad(A[0], A[1], B[1], B[0], n);                  // labial face
-        quad(A[3], A[2], B[2], B[3], -n);                 // lingual face
-        quad(A[0], A[3], B[3], B[0], Vector3d::UnitY());  // top
-        quad(A[1], A[2], B[2], B[1], -Vector3d::UnitY()); // bottom
-      }
-      const Vector3d t0 = b.V[sec[1][0]] - b.V[sec[0][0]], t1 = b.V[sec[kSegments][0]] - b.V[sec[kSegments - 1][0]];
-      quad(sec[0][0], sec[0][1], sec[0][2], sec[0][3], -t0);
-      quad(sec[kSegments][0], sec[kSegments][1], sec[kSegments][2], sec[kSegments][3], t1);
+// One arch of teeth (jaw 0: upper, 1: lower), incisors to premolars, as a closed
+// swept box between the lips and the cavity.
+void AddTeethArch(int jaw, Builder& b) {
+  constexpr int kSegments = 16;
+  constexpr double kHalfAngle = 1.15;              // radians of the arch on each side
+  const double ax = 21.0, az = 17.0, zc = 62.5;  // arch half-width, depth, centre (mm)
+  // The upper incisors reach ~3 mm below the stomion, the lower ones sit behind them.
+  const double y_top = jaw == 0 ? -67.0 : -77.5, y_bottom = jaw == 0 ? -78.5 : -87.0;
+  const double zj = jaw == 0 ? zc : zc - 3.0;
+  const double thick = 3.5;
+  VertexInfo vi;
+  vi.part = jaw == 0 ? kTeethUpper : kTeethLower;
+  std::vector<std::array<int, 4>> sec;
+  std::vector<Vector3d> out_n;
+  for (int i = 0; i <= kSegments; ++i) {
+    const double t = kHalfAngle * (2 * i - kSegments) / kSegments;  // exact ±t pairs
+    const Vector3d c(ax * std::sin(t), 0.0, zj + az * std::cos(t));
+    const Vector3d n = Vector3d(std::sin(t) / ax, 0.0, std::cos(t) / az).normalized();
+    std::array<int, 4> ids;
+    const Vector3d corners[4] = {c + 0.5 * thick * n + Vector3d(0, y_top, 0), c + 0.5 * thick * n + Vector3d(0, y_bottom, 0),
+                                 c - 0.5 * thick * n + Vector3d(0, y_bottom, 0), c - 0.5 * thick * n + Vector3d(0, y_top, 0)};
+    for (int k = 0; k < 4; ++k) {
+      ids[k] = b.Add(corners[k], Vector2d(5.0 + 0.5 * jaw + 0.5 * i / kSegments, 0.25 * k), vi);
+    }
+    sec.push_back(ids);
+    out_n.push_back(n);
+  }
+  auto quad = [&](int a, int bb, int c, int d, const Vector3d& outward) {
+    for (const Eigen::Vector3i& t : {Eigen::Vector3i(a, bb, c), Eigen::Vector3i(a, c, d)}) {
+      const Vector3d nrm = (b.V[t[1]] - b.V[t[0]]).cross(b.V[t[2]] - b.V[t[0]]);
+      b.F.push_back(nrm.dot(outward) >= 0.0 ? t : Eigen::Vector3i(t[0], t[2], t[1]));
+    }
+  };
+  for (int i = 0; i < kSegments; ++i) {
+    const auto& A = sec[i];
+    const auto& B = sec[i + 1];
+    const Vector3d n = (out_n[i] + out_n[i + 1]).normalized();
+    quad(A[0], A[1], B[1], B[0], n);                  // labial face
+    quad(A[3], A[2], B[2], B[3], -n);                 // lingual face
+    quad(A[0], A[3], B[3], B[0], Vector3d::UnitY());  // top
+    quad(A[1], A[2], B[2], B[1], -Vector3d::UnitY()); // bottom
+  }
+  const Vector3d t0 = b.V[sec[1][0]] - b.V[sec[0][0]], t1 = b.V[sec[kSegments][0]] - b.V[sec[kSegments - 1][0]];
+  quad(sec[0][0], sec[0][1], sec[0][2], sec[0][3], -t0);
+  quad(sec[kSegments][0], sec[kSegments][1], sec[kSegments][2], sec[kSegments][3], t1);
+}
+
+// Teeth: two arches (upper and lower incisors to premolars) as closed swept boxes
+// between the lips and the cavity; the lower one follows the jaw.
+void AddTeeth(Builder& b) {
+  for (int jaw = 0; jaw < 2; ++jaw) AddTeethArch(jaw, b);
+}
+
+// ---------------------------------------------------------------------------
+// The face UV chart.
+
+// The face part with its slits welded: each face vertex's index in P (-1 = not
+// on the face; a lower rim shares its upper rim's) and the face triangles.
+struct WeldedFace {
+  std::vector<int> local;
+  std::vector<Vector3d> P;
+  std::vector<Eigen::Vector3i> tris;
+};
+
+WeldedFace WeldFace(const GridNodes& nodes, const Builder& b) {
+  const int nv = static_cast<int>(b.V.size());
+  WeldedFace w;
+  std::vector<int>& local = w.local;
+  std::vector<Vector3d>& P = w.P;
+  local.assign(nv, -1);
+  for (int v = 0; v < nv; ++v) {
+    if (b.info[v].part != kFace || b.info[v].mouth_side < 0 || b.info[v].eye_side < 0) continue;
+    local[v] = static_cast<int>(P.size());
+    P.push_back(b.V[v]);
+  }
+  for (int v = 0; v < nv; ++v) {
+    if (b.info[v].part == kFace && (b.info[v].mouth_side < 0 || b.info[v].eye_side < 0)) {
+      local[v] = local[nodes.Face(b.info[v].r, b.info[v].c)];
     }
   }
+  for (const auto& t : b.F) {
+    if (b.info[t[0]].part == kFace && b.info[t[1]].part == kFace && b.info[t[2]].part == kFace) {
+      w.tris.emplace_back(local[t[0]], local[t[1]], local[t[2]]);
+    }
+  }
+  return w;
+}
 
+// Brings a conformal map `uw` of the triangles to the surface's scale (equal areas).
+void ScaleToSurfaceArea(const std::vector<Vector3d>& P, const std::vector<Eigen::Vector3i>& tris,
+                        std::vector<Vector2d>& uw) {
+  double a3 = 0.0, a2 = 0.0;
+  for (const auto& t : tris) {
+    a3 += 0.5 * (P[t[1]] - P[t[0]]).cross(P[t[2]] - P[t[0]]).norm();
+    const Vector2d e1 = uw[t[1]] - uw[t[0]], e2 = uw[t[2]] - uw[t[0]];
+    a2 += 0.5 * std::abs(e1.x() * e2.y() - e1.y() * e2.x());
+  }
+  for (auto& q : uw) q *= std::sqrt(a3 / a2);
+}
+
+// Face UV chart (LSCM then ARAP on the face triangles). The slits are welded:
+// upper and lower lid (lip) rims share their UVs, so the chart has no holes and
+// the lids cannot overlap in UV.
+void LayOutFaceChart(const Grid& g, const GridNodes& nodes, Builder& b) {
+  const int nv = static_cast<int>(b.V.size());
+  const WeldedFace face = WeldFace(nodes, b);
+  const std::vector<int>& local = face.local;
+  const std::vector<Vector3d>& P = face.P;
+  const std::vector<Eigen::Vector3i>& tris = face.tris;
+  const int pin_top = local[nodes.Face(g.fr0, g.c_centre)];
+  int r_bottom = g.fr1;
+  while (nodes.Face(r_bottom, g.c_centre) < 0) --r_bottom;
+  const int pin_bottom = local[nodes.Face(r_bottom, g.c_centre)];
+  std::vector<Vector2d> uw = Lscm(P, tris, pin_top, {0.0, 1.0}, pin_bottom, {0.0, 0.0});
+  // Bring the conformal map to the surface's scale, then relax it towards isometry.
+  ScaleToSurfaceArea(P, tris, uw);
+  uw = Arap(P, tris, uw, pin_top, 20);
+  double umin = 1e30, umax = -1e30, wmin = 1e30, wmax = -1e30;
+  for (const auto& q : uw) {
+    umin = std::min(umin, q.x());
+    umax = std::max(umax, q.x());
+    wmin = std::min(wmin, q.y());
+    wmax = std::max(wmax, q.y());
+  }
+  // LSCM keeps orientation, so u grows towards the subject's left (+x); checked here.
+  double sxu = 0.0;
+  for (int v = 0; v < nv; ++v) {
+    if (local[v] >= 0) sxu += b.V[v].x() * uw[local[v]].x();
+  }
+  Require(sxu > 0.0, "BuildProceduralRig: the face chart came out mirrored");
+  const double scale = 0.96 / std::max(umax - umin, wmax - wmin);
+  const double uc = 0.5 * (umin + umax), wc = 0.5 * (wmin + wmax);
+  for (int v = 0; v < nv; ++v) {
+    if (local[v] < 0) continue;
+    const Vector2d q = uw[local[v]];
+    b.UV[v] = Vector2d(0.5 + scale * (q.x() - uc), 0.5 - scale * (q.y() - wc));
+  }
+}
+
+// Opens the welded slits a little in UV: each rim vertex moves a fraction of the
+// way to its neighbour across the row, so that the lids (lips) do not share texels
+// and texel grids built on the chart do not bridge the openings.
+void OpenSlitsInUv(const GridNodes& nodes, Builder& b) {
+  const int nv = static_cast<int>(b.V.size());
+  for (int v = 0; v < nv; ++v) {
+    const VertexInfo& vi = b.info[v];
+    const int side = vi.eye_side != 0 ? vi.eye_side : vi.mouth_side;
+    if (vi.part != kFace || side == 0) continue;
+    const int across = nodes.Face(vi.r - side, vi.c);  // the next row above (upper) or below
+    const double fraction = vi.eye_side != 0 ? 0.4 : 0.25;
+    b.UV[v] += fraction * (b.UV[across] - b.UV[v]);
+  }
+}
+
+// The rig's neutral mesh (positions, triangles, UVs) and vertex parts.
+FaceRig RigFromBuilder(const Builder& b) {
   const int nv = static_cast<int>(b.V.size());
   FaceRig rig;
   rig.neutral.V.resize(nv, 3);
   for (int v = 0; v < nv; ++v) rig.neutral.V.row(v) = b.V[v].transpose();
   rig.neutral.F.resize(static_cast<Eigen::Index>(b.F.size()), 3);
   for (size_t f = 0; f < b.F.size(); ++f) rig.neutral.F.row(static_cast<Eigen::Index>(f)) = b.F[f].transpose();
-
-  // --- Face UV chart (LSCM then ARAP on the face triangles). The slits are welded:
-  // upper and lower lid (lip) rims share their UVs, so the chart has no holes and
-  // the lids cannot overlap in UV. --
-  {
-    std::vector<int> local(nv, -1);
-    std::vector<Vector3d> P;
-    for (int v = 0; v < nv; ++v) {
-      if (b.info[v].part != kFace || b.info[v].mouth_side < 0 || b.info[v].eye_side < 0) continue;
-      local[v] = static_cast<int>(P.size());
-      P.push_back(b.V[v]);
-    }
-    for (int v = 0; v < nv; ++v) {
-      if (b.info[v].part == kFace && (b.info[v].mouth_side < 0 || b.info[v].eye_side < 0)) {
-        local[v] = local[face_id[node(b.info[v].r, b.info[v].c)]];
-      }
-    }
-    std::vector<Eigen::Vector3i> tris;
-    for (const auto& t : b.F) {
-      if (b.info[t[0]].part == kFace && b.info[t[1]].part == kFace && b.info[t[2]].part == kFace) {
-        tris.emplace_back(local[t[0]], local[t[1]], local[t[2]]);
-      }
-    }
-    const int pin_top = local[face_id[node(g.fr0, g.c_centre)]];
-    int r_bottom = g.fr1;
-    while (face_id[node(r_bottom, g.c_centre)] < 0) --r_bottom;
-    const int pin_bottom = local[face_id[node(r_bottom, g.c_centre)]];
-    std::vector<Vector2d> uw = Lscm(P, tris, pin_top, {0.0, 1.0}, pin_bottom, {0.0, 0.0});
-    // Bring the conformal map to the surface's scale, then relax it towards isometry.
-    {
-      double a3 = 0.0, a2 = 0.0;
-      for (const auto& t : tris) {
-        a3 += 0.5 * (P[t[1]] - P[t[0]]).cross(P[t[2]] - P[t[0]]).norm();
-        const Vector2d e1 = uw[t[1]] - uw[t[0]], e2 = uw[t[2]] - uw[t[0]];
-        a2 += 0.5 * std::abs(e1.x() * e2.y() - e1.y() * e2.x());
-      }
-      for (auto& q : uw) q *= std::sqrt(a3 / a2);
-    }
-    uw = Arap(P, tris, uw, pin_top, 20);
-    double umin = 1e30, umax = -1e30, wmin = 1e30, wmax = -1e30;
-    for (const auto& q : uw) {
-      umin = std::min(umin, q.x());
-      umax = std::max(umax, q.x());
-      wmin = std::min(wmin, q.y());
-      wmax = std::max(wmax, q.y());
-    }
-    // LSCM keeps orientation, so u grows towards the subject's left (+x); checked here.
-    double sxu = 0.0;
-    for (int v = 0; v < nv; ++v) {
-      if (local[v] >= 0) sxu += b.V[v].x() * uw[local[v]].x();
-    }
-    Require(sxu > 0.0, "BuildProceduralRig: the face chart came out mirrored");
-    const double scale = 0.96 / std::max(umax - umin, wmax - wmin);
-    const double uc = 0.5 * (umin + umax), wc = 0.5 * (wmin + wmax);
-    for (int v = 0; v < nv; ++v) {
-      if (local[v] < 0) continue;
-      const Vector2d q = uw[local[v]];
-      b.UV[v] = Vector2d(0.5 + scale * (q.x() - uc), 0.5 - scale * (q.y() - wc));
-    }
-  }
-  // Open the welded slits a little in UV: each rim vertex moves a fraction of the
-  // way to its neighbour across the row, so that the lids (lips) do not share texels
-  // and texel grids built on the chart do not bridge the openings.
-  for (int v = 0; v < nv; ++v) {
-    const VertexInfo& vi = b.info[v];
-    const int side = vi.eye_side != 0 ? vi.eye_side : vi.mouth_side;
-    if (vi.part != kFace || side == 0) continue;
-    const int across = face_id[node(vi.r - side, vi.c)];  // the next row above (upper) or below
-    const double fraction = vi.eye_side != 0 ? 0.4 : 0.25;
-    b.UV[v] += fraction * (b.UV[across] - b.UV[v]);
-  }
   rig.neutral.UV.resize(nv, 2);
   for (int v = 0; v < nv; ++v) rig.neutral.UV.row(v) = b.UV[v].transpose();
-
   rig.part_names = PartNames();
   rig.vertex_part.resize(nv);
   for (int v = 0; v < nv; ++v) rig.vertex_part[v] = static_cast<uint8_t>(b.info[v].part);
+  return rig;
+}
 
-  // --- Mirror map (exact: the construction is symmetric bit for bit). ----------
+// Mirror map (exact: the construction is symmetric bit for bit): each vertex's
+// mirror image across x = 0.
+std::vector<int> MirrorMap(const Builder& b) {
+  const int nv = static_cast<int>(b.V.size());
   std::vector<int> mirror(nv, -1);
-  {
-    auto group = [](int part) { return IsEyePart(part) ? (IsLeftEyePart(part) ? part : part - 1) : part; };
-    // Positions rounded to 0.1 µm (the mirrored halves agree to rounding error).
-    std::map<std::tuple<int64_t, int64_t, int64_t, int, int, int>, int> index;
-    auto key = [&](int v, double sx) {
-      const VertexInfo& vi = b.info[v];
-      auto q = [](double x) { return static_cast<int64_t>(std::llround(x * 1e4)); };
-      return std::make_tuple(q(sx * b.V[v].x()), q(b.V[v].y()), q(b.V[v].z()), group(vi.part), vi.eye_side,
-                             vi.mouth_side);
-    };
-    for (int v = 0; v < nv; ++v) index[key(v, 1.0)] = v;
-    for (int v = 0; v < nv; ++v) {
-      auto it = index.find(key(v, -1.0));
-      Require(it != index.end(), fmt::format("BuildProceduralRig: vertex {} has no mirror image", v));
-      mirror[v] = it->second;
-    }
+  auto group = [](int part) { return IsEyePart(part) ? (IsLeftEyePart(part) ? part : part - 1) : part; };
+  // Positions rounded to 0.1 µm (the mirrored halves agree to rounding error).
+  std::map<std::tuple<int64_t, int64_t, int64_t, int, int, int>, int> index;
+  auto key = [&](int v, double sx) {
+    const VertexInfo& vi = b.info[v];
+    auto q = [](double x) { return static_cast<int64_t>(std::llround(x * 1e4)); };
+    return std::make_tuple(q(sx * b.V[v].x()), q(b.V[v].y()), q(b.V[v].z()), group(vi.part), vi.eye_side,
+                           vi.mouth_side);
+  };
+  for (int v = 0; v < nv; ++v) index[key(v, 1.0)] = v;
+  for (int v = 0; v < nv; ++v) {
+    auto it = index.find(key(v, -1.0));
+    Require(it != index.end(), fmt::format("BuildProceduralRig: vertex {} has no mirror image", v));
+    mirror[v] = it->second;
   }
+  return mirror;
+}
 
-  // --- Stomion height (for lip fields) -----------------------------------------
-  const double y_mouth = b.V[face_id[node(g.r_mouth, g.c_centre)]].y();
+// Stomion height (for lip fields): y of the mouth slit at the midline.
+double StomionHeight(const Grid& g, const GridNodes& nodes, const Builder& b) {
+  return b.V[nodes.Face(g.r_mouth, g.c_centre)].y();
+}
 
-  // --- Jaw weight and rotation. --------------------------------------------------
-  auto jaw_weight = [&](const Vector3d& p, const VertexInfo& vi) {
-    if (vi.part == kMouthCavity) return 1.0 - Smoothstep(-86.0, -72.0, p.y());
-    if (vi.part == kTeethLower) return 1.0;
-    if (vi.part == kTeethUpper) return 0.0;
-    if (!vi.grid) return 0.0;
-    if (vi.mouth_side != 0) return vi.mouth_side < 0 ? 1.0 : 0.0;
-    const double horiz = std::hypot(p.x(), p.z());
-    const double psi = std::atan2(p.y(), horiz) / kDeg;
-    const double aphi = std::abs(std::atan2(p.x(), p.z())) / kDeg;
-    const double s = (kMouthPsi - psi) * kDeg * p.norm();  // mm below the stomion cone
-    const double delta = 1.2 + 14.0 * Smoothstep(18.0, 45.0, aphi);
-    return Smoothstep(-delta, delta, s) * (1.0 - Smoothstep(50.0, 88.0, aphi)) * Smoothstep(-178.0, -140.0, p.y());
-  };
+// ---------------------------------------------------------------------------
+// Expressions.
 
-  // --- Expressions. -------------------------------------------------------------
-  const double jaw_rad = options.jaw_open_deg * kDeg;
-  auto mouth_upper = [&](const Vector3d& p, const VertexInfo& vi) {
-    if (vi.mouth_side != 0) return vi.mouth_side > 0 ? 1.0 : 0.0;
-    return Smoothstep(y_mouth - 2.0, y_mouth + 2.0, p.y());
-  };
-  auto crow = [](const Vector3d& p) {  // skin lateral of the outer canthus pulled towards it
-    const double gg = Gauss(p.x(), 56.0, 9.0) * Gauss(p.y(), -1.0, 9.0) * Smoothstep(-10.0, 40.0, p.z());
-    return Vector3d(-3.0 * gg, 1.0 * gg, 0.0);
-  };
-  auto cheek_raise = [](const Vector3d& p, double amount) {
-    const double gg = Gauss(p.x(), 39.0, 13.0) * Gauss(p.y(), -24.0, 11.0) * Front(p);
-    return Vector3d(0.15 * amount * gg, amount * gg, 0.3 * amount * gg);
-  };
-  using VI = VertexInfo;
-  std::vector<ExpressionDef> defs = {
+// Jaw weight: the fraction of the jaw's motion (jawOpen's rotation about the
+// hinge, jawLeft, jawForward) that a vertex follows.
+double JawWeight(const Vector3d& p, const VertexInfo& vi) {
+  if (vi.part == kMouthCavity) return 1.0 - Smoothstep(-86.0, -72.0, p.y());
+  if (vi.part == kTeethLower) return 1.0;
+  if (vi.part == kTeethUpper) return 0.0;
+  if (!vi.grid) return 0.0;
+  if (vi.mouth_side != 0) return vi.mouth_side < 0 ? 1.0 : 0.0;
+  const double horiz = std::hypot(p.x(), p.z());
+  const double psi = std::atan2(p.y(), horiz) / kDeg;
+  const double aphi = std::abs(std::atan2(p.x(), p.z())) / kDeg;
+  const double s = (kMouthPsi - psi) * kDeg * p.norm();  // mm below the stomion cone
+  const double delta = 1.2 + 14.0 * Smoothstep(18.0, 45.0, aphi);
+  return Smoothstep(-delta, delta, s) * (1.0 - Smoothstep(50.0, 88.0, aphi)) * Smoothstep(-178.0, -140.0, p.y());
+}
+
+// 1 on the upper lip and above the stomion, 0 on the lower lip and below.
+double MouthUpper(const Vector3d& p, const VertexInfo& vi, double y_mouth) {
+  if (vi.mouth_side != 0) return vi.mouth_side > 0 ? 1.0 : 0.0;
+  return Smoothstep(y_mouth - 2.0, y_mouth + 2.0, p.y());
+}
+
+// Skin lateral of the outer canthus pulled towards it.
+Vector3d CrowsFeet(const Vector3d& p) {
+  const double gg = Gauss(p.x(), 56.0, 9.0) * Gauss(p.y(), -1.0, 9.0) * Smoothstep(-10.0, 40.0, p.z());
+  return Vector3d(-3.0 * gg, 1.0 * gg, 0.0);
+}
+
+// The cheek under the eye pushed up (and a little out and forward), `amount` mm at its peak.
+Vector3d CheekRaise(const Vector3d& p, double amount) {
+  const double gg = Gauss(p.x(), 39.0, 13.0) * Gauss(p.y(), -24.0, 11.0) * Front(p);
+  return Vector3d(0.15 * amount * gg, amount * gg, 0.3 * amount * gg);
+}
+
+// Left/right pairs of the upper face: brows, lids, cheek squint and nose sneer.
+std::vector<ExpressionDef> UpperFaceExpressions() {
+  return {
       {"browInnerUp_L", "browInnerUp_R",
        [](const Vector3d& p, const VI&) {
          const double gg = Gauss(p.x(), 16.0, 10.0) * BrowProfile(p.y()) * Front(p);
@@ -996,13 +1060,13 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
          return Vector3d(0.0, 1.5 * gg, 0.0);
        },
        [](LidState& l) { l.upper[0] = kUpperLidOpen + 1.8; }},
-      {"eyeSquint_L", "eyeSquint_R", [&](const Vector3d& p, const VI&) { return crow(p); },
+      {"eyeSquint_L", "eyeSquint_R", [](const Vector3d& p, const VI&) { return CrowsFeet(p); },
        [](LidState& l) {
          l.upper[0] = kUpperLidOpen - 0.6;
          l.lower[0] = kLowerLidOpen - 1.4;
        }},
       {"cheekSquint_L", "cheekSquint_R",
-       [&](const Vector3d& p, const VI&) { return Vector3d(cheek_raise(p, 4.0) + 0.5 * crow(p)); },
+       [](const Vector3d& p, const VI&) { return Vector3d(CheekRaise(p, 4.0) + 0.5 * CrowsFeet(p)); },
        [](LidState& l) { l.lower[0] = kLowerLidOpen - 0.7; }},
       {"noseSneer_L", "noseSneer_R",
        [](const Vector3d& p, const VI&) {
@@ -1011,57 +1075,70 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
          return Vector3d(0.5 * gg - 0.5 * g2, 5.0 * gg - 2.0 * g2, 0.3 * gg);
        },
        {}},
+  };
+}
+
+// Left/right pairs of the mouth (`y_mouth`: the stomion height).
+std::vector<ExpressionDef> MouthExpressions(double y_mouth) {
+  return {
       {"mouthSmile_L", "mouthSmile_R",
-       [&](const Vector3d& p, const VI&) {
+       [y_mouth](const Vector3d& p, const VI&) {
          const double gg = Gauss(p.x(), 26.0, 11.0) * Gauss(p.y(), y_mouth, 11.0) * Front(p);
-         return Vector3d(Vector3d(7.0 * gg, 7.5 * gg, -3.0 * gg) + cheek_raise(p, 3.5) + 0.5 * crow(p));
+         return Vector3d(Vector3d(7.0 * gg, 7.5 * gg, -3.0 * gg) + CheekRaise(p, 3.5) + 0.5 * CrowsFeet(p));
        },
        [](LidState& l) { l.lower[0] = kLowerLidOpen - 0.5; }},
       {"mouthFrown_L", "mouthFrown_R",
-       [&](const Vector3d& p, const VI&) {
+       [y_mouth](const Vector3d& p, const VI&) {
          const double gg = Gauss(p.x(), 25.0, 9.0) * Gauss(p.y(), y_mouth - 4.0, 10.0) * Front(p);
          return Vector3d(0.8 * gg, -4.5 * gg, -0.6 * gg);
        },
        {}},
       {"mouthStretch_L", "mouthStretch_R",
-       [&](const Vector3d& p, const VI&) {
+       [y_mouth](const Vector3d& p, const VI&) {
          const double gg = Gauss(p.x(), 27.0, 12.0) * Gauss(p.y(), y_mouth - 4.0, 12.0) * Front(p);
          return Vector3d(4.0 * gg, -2.5 * gg, -1.5 * gg);
        },
        {}},
       {"mouthPress_L", "mouthPress_R",
-       [&](const Vector3d& p, const VI&) {
+       [y_mouth](const Vector3d& p, const VI&) {
          const double gg = Gauss(p.x(), 10.0, 14.0) * Gauss(p.y(), y_mouth, 8.0) * Front(p);
          return Vector3d(0.0, -1.5 * std::tanh((p.y() - y_mouth) / 2.5) * gg, -1.2 * gg);
        },
        {}},
       {"mouthUpperUp_L", "mouthUpperUp_R",
-       [&](const Vector3d& p, const VI& vi) {
-         const double gg = Gauss(p.x(), 11.0, 9.0) * Gauss(p.y(), y_mouth + 6.0, 8.0) * Front(p) * mouth_upper(p, vi);
+       [y_mouth](const Vector3d& p, const VI& vi) {
+         const double gg =
+             Gauss(p.x(), 11.0, 9.0) * Gauss(p.y(), y_mouth + 6.0, 8.0) * Front(p) * MouthUpper(p, vi, y_mouth);
          return Vector3d(0.0, 3.5 * gg, 1.0 * gg);
        },
        {}},
       {"mouthLowerDown_L", "mouthLowerDown_R",
-       [&](const Vector3d& p, const VI& vi) {
-         const double gg =
-             Gauss(p.x(), 11.0, 9.0) * Gauss(p.y(), y_mouth - 8.0, 9.0) * Front(p) * (1.0 - mouth_upper(p, vi));
+       [y_mouth](const Vector3d& p, const VI& vi) {
+         const double gg = Gauss(p.x(), 11.0, 9.0) * Gauss(p.y(), y_mouth - 8.0, 9.0) * Front(p) *
+                           (1.0 - MouthUpper(p, vi, y_mouth));
          return Vector3d(0.0, -4.0 * gg, 0.5 * gg);
        },
        {}},
       {"mouthDimple_L", "mouthDimple_R",
-       [&](const Vector3d& p, const VI&) {
+       [y_mouth](const Vector3d& p, const VI&) {
          const double gg = Gauss(p.x(), 28.0, 8.0) * Gauss(p.y(), y_mouth, 9.0) * Front(p);
          return Vector3d(2.0 * gg, 0.0, -2.5 * gg);
        },
        {}},
       {"mouthLeft", "mouthRight",
-       [&](const Vector3d& p, const VI&) {
+       [y_mouth](const Vector3d& p, const VI&) {
          const double gg = Gauss(p.x(), 0.0, 22.0) * Gauss(p.y(), y_mouth - 1.0, 11.0) * Front(p);
          return Vector3d(5.0 * gg, 0.0, 0.0);
        },
        {}},
+  };
+}
+
+// Left/right pairs of the jaw and the gaze (the eyeballs rotate about their centre).
+std::vector<ExpressionDef> JawSideAndGazeExpressions() {
+  return {
       {"jawLeft", "jawRight",
-       [&](const Vector3d& p, const VI& vi) { return Vector3d(5.0 * jaw_weight(p, vi), 0.0, 0.0); }, {}},
+       [](const Vector3d& p, const VI& vi) { return Vector3d(5.0 * JawWeight(p, vi), 0.0, 0.0); }, {}},
       {"eyeLookUp_L", "eyeLookUp_R",
        [](const Vector3d& p, const VI& vi) {
          if (!IsLeftEyePart(vi.part)) return Vector3d(Vector3d::Zero());
@@ -1086,13 +1163,19 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
          return Vector3d(kEyeCentre + Eigen::AngleAxisd(25.0 * kDeg, Vector3d::UnitY()) * (p - kEyeCentre) - p);
        },
        {}},
+  };
+}
+
+// Unpaired (symmetric) shapes: jaw, cheeks and lips (`jaw_rad`: jawOpen's rotation).
+std::vector<ExpressionDef> CentreExpressions(double y_mouth, double jaw_rad) {
+  return {
       {"jawOpen", "",
-       [&](const Vector3d& p, const VI& vi) {
-         return Vector3d(RotateX(p, kJawHinge, jaw_rad * jaw_weight(p, vi)) - p);
+       [jaw_rad](const Vector3d& p, const VI& vi) {
+         return Vector3d(RotateX(p, kJawHinge, jaw_rad * JawWeight(p, vi)) - p);
        },
        {}},
       {"jawForward", "",
-       [&](const Vector3d& p, const VI& vi) { return Vector3d(0.0, 0.0, 5.0 * jaw_weight(p, vi)); }, {}},
+       [](const Vector3d& p, const VI& vi) { return Vector3d(0.0, 0.0, 5.0 * JawWeight(p, vi)); }, {}},
       {"cheekPuff", "",
        [](const Vector3d& p, const VI&) {
          const double gg = Gauss(std::abs(p.x()), 40.0, 14.0) * Gauss(p.y(), -55.0, 15.0) * Front(p);
@@ -1100,58 +1183,80 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
        },
        {}},
       {"mouthPucker", "",
-       [&](const Vector3d& p, const VI&) {
+       [y_mouth](const Vector3d& p, const VI&) {
          const double gg = Gauss(p.x(), 0.0, 18.0) * Gauss(p.y(), y_mouth, 9.0) * Front(p);
          return Vector3d(-0.3 * p.x() * gg, 0.0, 6.0 * gg);
        },
        {}},
       {"mouthFunnel", "",
-       [&](const Vector3d& p, const VI& vi) {
+       [y_mouth](const Vector3d& p, const VI& vi) {
          const double gg = Gauss(p.x(), 0.0, 18.0) * Gauss(p.y(), y_mouth, 9.0) * Front(p);
-         const double up = 2.0 * mouth_upper(p, vi) - 1.0;
+         const double up = 2.0 * MouthUpper(p, vi, y_mouth) - 1.0;
          return Vector3d(-0.15 * p.x() * gg, 2.0 * up * gg, 4.0 * gg);
        },
        {}},
       {"mouthShrugLower", "",
-       [&](const Vector3d& p, const VI& vi) {
+       [y_mouth](const Vector3d& p, const VI& vi) {
          const double gg = Gauss(p.x(), 0.0, 20.0) * Gauss(p.y(), y_mouth - 18.0, 12.0) * Front(p) *
-                           (1.0 - mouth_upper(p, vi));
+                           (1.0 - MouthUpper(p, vi, y_mouth));
          return Vector3d(0.0, 3.0 * gg, 1.5 * gg);
        },
        {}},
       {"mouthShrugUpper", "",
-       [&](const Vector3d& p, const VI& vi) {
-         const double gg = Gauss(p.x(), 0.0, 18.0) * Gauss(p.y(), y_mouth + 6.0, 8.0) * Front(p) * mouth_upper(p, vi);
+       [y_mouth](const Vector3d& p, const VI& vi) {
+         const double gg =
+             Gauss(p.x(), 0.0, 18.0) * Gauss(p.y(), y_mouth + 6.0, 8.0) * Front(p) * MouthUpper(p, vi, y_mouth);
          return Vector3d(0.0, 2.0 * gg, 0.8 * gg);
        },
        {}},
   };
+}
 
-  auto eval_expression = [&](const ExpressionDef& d) {
-    MatX3d D = MatX3d::Zero(nv, 3);
-    LidState lids;
-    if (d.lids) d.lids(lids);
-    for (int v = 0; v < nv; ++v) {
-      const VertexInfo& vi = b.info[v];
-      // Eyeballs, ears and teeth do not deform with the skin (teeth follow the jaw).
-      if (d.field && vi.part != kEars) {
-        const bool eye = IsEyePart(vi.part), teeth = vi.part == kTeethUpper || vi.part == kTeethLower;
-        if ((!eye || d.name.rfind("eyeLook", 0) == 0) && (!teeth || d.name.rfind("jaw", 0) == 0)) {
-          D.row(v) = d.field(b.V[v], vi).transpose();
-        }
-      }
-      if (d.lids && vi.grid && vi.part == kFace) {
-        const double psi = NodePsi(g, vi.r, vi.c), phi = g.phi[vi.c];
-        if (EyeWarp(psi, phi, vi.eye_side, lids) != EyeWarp(psi, phi, vi.eye_side, neutral_lids)) {
-          D.row(v) += (head.NodePosition(vi, lids) - b.V[v]).transpose();
-        }
+// All expression definitions in the rig's order.
+std::vector<ExpressionDef> ExpressionDefs(double y_mouth, double jaw_rad) {
+  std::vector<ExpressionDef> defs = UpperFaceExpressions();
+  for (const auto& group : {MouthExpressions(y_mouth), JawSideAndGazeExpressions(), CentreExpressions(y_mouth, jaw_rad)}) {
+    defs.insert(defs.end(), group.begin(), group.end());
+  }
+  return defs;
+}
+
+// An expression's displacement of every vertex: its field (eyeballs, ears and
+// teeth excepted) plus the lid rims its lid openings move.
+MatX3d EvalExpression(const ExpressionDef& d, const HeadModel& head, const Builder& b) {
+  const Grid& g = head.grid;
+  const int nv = static_cast<int>(b.V.size());
+  const LidState neutral_lids;
+  MatX3d D = MatX3d::Zero(nv, 3);
+  LidState lids;
+  if (d.lids) d.lids(lids);
+  for (int v = 0; v < nv; ++v) {
+    const VertexInfo& vi = b.info[v];
+    // Eyeballs, ears and teeth do not deform with the skin (teeth follow the jaw).
+    if (d.field && vi.part != kEars) {
+      const bool eye = IsEyePart(vi.part), teeth = vi.part == kTeethUpper || vi.part == kTeethLower;
+      if ((!eye || d.name.rfind("eyeLook", 0) == 0) && (!teeth || d.name.rfind("jaw", 0) == 0)) {
+        D.row(v) = d.field(b.V[v], vi).transpose();
       }
     }
-    return D;
-  };
+    if (d.lids && vi.grid && vi.part == kFace) {
+      const double psi = NodePsi(g, vi.r, vi.c), phi = g.phi[vi.c];
+      if (EyeWarp(psi, phi, vi.eye_side, lids) != EyeWarp(psi, phi, vi.eye_side, neutral_lids)) {
+        D.row(v) += (head.NodePosition(vi, lids) - b.V[v]).transpose();
+      }
+    }
+  }
+  return D;
+}
+
+// Expressions: each definition, then the mirror image of a pair's, as columns of
+// the expression basis.
+void AddExpressions(const std::vector<ExpressionDef>& defs, const HeadModel& head, const Builder& b,
+                    const std::vector<int>& mirror, FaceRig& rig) {
+  const int nv = static_cast<int>(b.V.size());
   std::vector<MatX3d> expr;
   for (const auto& d : defs) {
-    const MatX3d D = eval_expression(d);
+    const MatX3d D = EvalExpression(d, head, b);
     rig.expression_names.push_back(d.name);
     expr.push_back(D);
     if (!d.mirror.empty()) {
@@ -1170,15 +1275,21 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
       for (int k = 0; k < 3; ++k) rig.expression_basis(3 * v + k, static_cast<Eigen::Index>(e)) = static_cast<float>(expr[e](v, k));
     }
   }
+}
 
-  // --- Identity modes: symmetric smooth fields, ±1 ≈ ±1 standard deviation. -----
-  // Eyeballs move rigidly with the field at their centre.
-  struct IdentityDef {
-    std::string name;
-    std::function<Vector3d(const Vector3d&, const VertexInfo&)> field;
-  };
-  auto sgn = [](double x) { return x < 0.0 ? -1.0 : 1.0; };
-  const std::vector<IdentityDef> ids = {
+// ---------------------------------------------------------------------------
+// Identity modes: symmetric smooth fields, ±1 ≈ ±1 standard deviation.
+
+struct IdentityDef {
+  std::string name;
+  std::function<Vector3d(const Vector3d&, const VertexInfo&)> field;
+};
+
+double Sign(double x) { return x < 0.0 ? -1.0 : 1.0; }
+
+// The head's size and proportions, the forehead, brows and eyes.
+std::vector<IdentityDef> HeadAndEyeIdentityModes() {
+  return {
       {"head_width", [](const Vector3d& p, const VI&) { return Vector3d(3.5 * p.x() / 75.0, 0, 0); }},
       {"face_width",
        [](const Vector3d& p, const VI&) {
@@ -1197,8 +1308,8 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
          return Vector3d(0, 0, 2.5 * Gauss(std::abs(p.x()), 28.0, 18.0) * Gauss(p.y(), 22.0, 7.0) * Front(p));
        }},
       {"eye_spacing",
-       [&](const Vector3d& p, const VI&) {
-         return Vector3d(2.0 * sgn(p.x()) * Gauss(std::abs(p.x()), 32.0, 14.0) * Gauss(p.y(), 0.0, 14.0) * Front(p), 0, 0);
+       [](const Vector3d& p, const VI&) {
+         return Vector3d(2.0 * Sign(p.x()) * Gauss(std::abs(p.x()), 32.0, 14.0) * Gauss(p.y(), 0.0, 14.0) * Front(p), 0, 0);
        }},
       {"eye_size",
        [](const Vector3d& p, const VI&) {
@@ -1210,14 +1321,20 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
        [](const Vector3d& p, const VI&) {
          return Vector3d(0, 0, -2.0 * Gauss(std::abs(p.x()), 32.0, 14.0) * Gauss(p.y(), 0.0, 12.0) * Front(p));
        }},
+  };
+}
+
+// The nose and the cheeks.
+std::vector<IdentityDef> NoseAndCheekIdentityModes() {
+  return {
       {"nose_length",
        [](const Vector3d& p, const VI&) {
          const double prof = Smoothstep(2.0, -42.0, p.y()) * (1.0 - Smoothstep(-44.0, -62.0, p.y()));
          return Vector3d(0, -3.0 * Gauss(p.x(), 0.0, 13.0) * prof * Front(p), 0);
        }},
       {"nose_width",
-       [&](const Vector3d& p, const VI&) {
-         return Vector3d(2.2 * sgn(p.x()) * Gauss(std::abs(p.x()), 14.0, 7.0) * Gauss(p.y(), -47.0, 8.0) * Front(p), 0, 0);
+       [](const Vector3d& p, const VI&) {
+         return Vector3d(2.2 * Sign(p.x()) * Gauss(std::abs(p.x()), 14.0, 7.0) * Gauss(p.y(), -47.0, 8.0) * Front(p), 0, 0);
        }},
       {"nose_projection",
        [](const Vector3d& p, const VI&) {
@@ -1232,18 +1349,24 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
          return Vector3d(0, 2.0 * Gauss(p.x(), 0.0, 9.0) * Gauss(p.y(), -46.0, 7.0) * Front(p), 0);
        }},
       {"cheekbones",
-       [&](const Vector3d& p, const VI&) {
+       [](const Vector3d& p, const VI&) {
          const double gg = 2.5 * Gauss(std::abs(p.x()), 48.0, 14.0) * Gauss(p.y(), -12.0, 12.0) * Front(p);
-         return Vector3d(0.7 * sgn(p.x()) * gg, 0, 0.7 * gg);
+         return Vector3d(0.7 * Sign(p.x()) * gg, 0, 0.7 * gg);
        }},
       {"cheek_fullness",
-       [&](const Vector3d& p, const VI&) {
+       [](const Vector3d& p, const VI&) {
          const double gg = 3.0 * Gauss(std::abs(p.x()), 40.0, 14.0) * Gauss(p.y(), -55.0, 16.0) * Front(p);
-         return Vector3d(0.6 * sgn(p.x()) * gg, 0, 0.8 * gg);
+         return Vector3d(0.6 * Sign(p.x()) * gg, 0, 0.8 * gg);
        }},
+  };
+}
+
+// The jaw, chin, lips (`y_mouth`: the stomion height), midface, ears and neck.
+std::vector<IdentityDef> JawMouthEarAndNeckIdentityModes(double y_mouth) {
+  return {
       {"jaw_width",
-       [&](const Vector3d& p, const VI&) {
-         return Vector3d(4.0 * sgn(p.x()) * Gauss(std::abs(p.x()), 50.0, 18.0) * Gauss(p.y(), -85.0, 20.0) *
+       [](const Vector3d& p, const VI&) {
+         return Vector3d(4.0 * Sign(p.x()) * Gauss(std::abs(p.x()), 50.0, 18.0) * Gauss(p.y(), -85.0, 20.0) *
                              Smoothstep(-50.0, 0.0, p.z()),
                          0, 0);
        }},
@@ -1256,14 +1379,14 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
          return Vector3d(0, -3.0 * Smoothstep(-86.0, -118.0, p.y()) * Gauss(p.x(), 0.0, 35.0) * Front(p), 0);
        }},
       {"lip_fullness",
-       [&](const Vector3d& p, const VI& vi) {
+       [y_mouth](const Vector3d& p, const VI& vi) {
          const double gg = Gauss(p.x(), 0.0, 18.0) * Gauss(p.y(), y_mouth, 7.0) * Front(p);
          const double up = vi.mouth_side != 0 ? 0.0 : std::tanh((p.y() - y_mouth) / 3.0);
          return Vector3d(0, 1.0 * up * gg, 1.8 * gg);
        }},
       {"mouth_width",
-       [&](const Vector3d& p, const VI&) {
-         return Vector3d(3.0 * sgn(p.x()) * Gauss(std::abs(p.x()), 25.0, 10.0) * Gauss(p.y(), y_mouth, 10.0) * Front(p), 0, 0);
+       [y_mouth](const Vector3d& p, const VI&) {
+         return Vector3d(3.0 * Sign(p.x()) * Gauss(std::abs(p.x()), 25.0, 10.0) * Gauss(p.y(), y_mouth, 10.0) * Front(p), 0, 0);
        }},
       {"upper_lip_height",
        [](const Vector3d& p, const VI&) {
@@ -1274,13 +1397,23 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
          return Vector3d(0, 0, 3.0 * Gauss(p.y(), -30.0, 25.0) * Gauss(p.x(), 0.0, 40.0) * Front(p));
        }},
       {"ear_protrusion",
-       [&](const Vector3d& p, const VI& vi) {
+       [](const Vector3d& p, const VI& vi) {
          if (vi.part != kEars) return Vector3d(Vector3d::Zero());
-         return Vector3d(4.0 * sgn(p.x()) * Smoothstep(-5.0, -30.0, p.z()), 0, 0);
+         return Vector3d(4.0 * Sign(p.x()) * Smoothstep(-5.0, -30.0, p.z()), 0, 0);
        }},
       {"neck_width",
        [](const Vector3d& p, const VI&) { return Vector3d(4.0 * p.x() / 55.0 * Smoothstep(-120.0, -170.0, p.y()), 0, 0); }},
   };
+}
+
+// The identity modes as columns of the identity basis. Eyeballs move rigidly with
+// the field at their centre.
+void AddIdentityModes(double y_mouth, const Builder& b, FaceRig& rig) {
+  std::vector<IdentityDef> ids = HeadAndEyeIdentityModes();
+  for (const auto& group : {NoseAndCheekIdentityModes(), JawMouthEarAndNeckIdentityModes(y_mouth)}) {
+    ids.insert(ids.end(), group.begin(), group.end());
+  }
+  const int nv = static_cast<int>(b.V.size());
   rig.identity_basis.resize(3 * nv, static_cast<Eigen::Index>(ids.size()));
   for (size_t k = 0; k < ids.size(); ++k) {
     rig.identity_names.push_back(ids[k].name);
@@ -1297,198 +1430,270 @@ FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
       for (int j = 0; j < 3; ++j) rig.identity_basis(3 * v + j, static_cast<Eigen::Index>(k)) = static_cast<float>(d[j]);
     }
   }
+}
 
-  // --- Landmarks (iBUG 68). -----------------------------------------------------
-  {
-    const std::vector<std::string> names = IbugLandmarkNames();
-    std::vector<int> lm(69, -1);
-    auto interior_face = [&](int v) {
-      const VertexInfo& vi = b.info[v];
-      return vi.part == kFace && g.InteriorFaceNode(vi.r, vi.c);
-    };
-    const MatX3d N = [&] {
-      TriMesh m = rig.neutral;
-      return VertexNormals(m);
-    }();
-    // Nearest front-facing face vertex to a frontal (x, y) target.
-    auto nearest_xy = [&](double x, double y) {
-      int best = -1;
-      double bd = 1e30;
-      for (int v = 0; v < nv; ++v) {
-        if (!interior_face(v) || b.V[v].z() < 0.0 || N(v, 2) < 0.25 || b.info[v].mouth_side < 0 || b.info[v].eye_side < 0) continue;
-        const double d = std::hypot(b.V[v].x() - x, b.V[v].y() - y);
-        if (d < bd) {
-          bd = d;
-          best = v;
-        }
-      }
-      return best;
-    };
-    // Jaw contour: the face outline seen from the front (the extreme front-facing
-    // vertex along many directions in the image plane, from the subject's right at
-    // ear level, under the chin, to the left), resampled to 17 points at equal arc
-    // length as annotators space them.
-    {
-      std::vector<int> outline;
-      const Vector2d centre(0.0, -18.0);
-      for (int k = 0; k <= 360; ++k) {
-        const double a = (180.0 + 180.0 * k / 360.0) * kDeg;
-        const Vector2d dir(std::cos(a), std::sin(a));
-        int best = -1;
-        double bd = -1e30;
-        for (int v = 0; v < nv; ++v) {
-          if (!interior_face(v) || b.V[v].y() > -8.0 || b.info[v].mouth_side < 0 || N(v, 2) < 0.1) continue;
-          const double d = (Vector2d(b.V[v].x(), b.V[v].y()) - centre).dot(dir);
-          if (d > bd) {
-            bd = d;
-            best = v;
-          }
-        }
-        if (best >= 0 && (outline.empty() || outline.back() != best)) outline.push_back(best);
-      }
-      Require(outline.size() >= 17, "BuildProceduralRig: the face outline is too short for the jaw landmarks");
-      std::vector<double> arc(outline.size(), 0.0);
-      for (size_t i = 1; i < outline.size(); ++i) {
-        arc[i] = arc[i - 1] + (b.V[outline[i]] - b.V[outline[i - 1]]).head<2>().norm();
-      }
-      for (int k = 0; k < 17; ++k) {
-        const double target = arc.back() * k / 16.0;
-        size_t i = 0;
-        while (i + 1 < arc.size() && std::abs(arc[i + 1] - target) <= std::abs(arc[i] - target)) ++i;
-        lm[1 + k] = outline[i];
-      }
-    }
-    // Brows (18–22 the subject's right, outer to inner; 23–27 left, inner to outer).
-    const double brow_x[5] = {50, 42, 33, 24, 15}, brow_y[5] = {17, 23, 25.5, 25, 22};
-    for (int k = 0; k < 5; ++k) {
-      lm[18 + k] = nearest_xy(-brow_x[k], brow_y[k]);
-      lm[27 - k] = nearest_xy(brow_x[k], brow_y[k]);
-    }
-    // Nose bridge 28–31 (nasion to tip) and the lower nose 32–36.
-    const double bridge_y[4] = {0.0, -13.0, -27.0, -41.0};
-    for (int k = 0; k < 4; ++k) lm[28 + k] = nearest_xy(0.0, bridge_y[k]);
-    const double nose_x[5] = {-13.0, -7.0, 0.0, 7.0, 13.0}, nose_y[5] = {-51.0, -54.0, -55.0, -54.0, -51.0};
-    for (int k = 0; k < 5; ++k) lm[32 + k] = nearest_xy(nose_x[k], nose_y[k]);
-    // Eyes: corners and rim vertices of the slits (upper and lower at the same columns,
-    // so that a blink brings them together).
-    auto col_at = [&](double frac) {  // left eye, fraction from inner to outer corner
-      return g.eye_ci + static_cast<int>(std::lround(frac * (g.eye_co - g.eye_ci)));
-    };
-    auto upper = [&](int c) { return face_id[node(g.r_eye, c)]; };
-    auto lower_v = [&](int c) { return lower_id[node(g.r_eye, c)]; };
-    const int c1 = col_at(1.0 / 3.0), c2 = col_at(2.0 / 3.0);
-    lm[43] = upper(g.eye_ci);
-    lm[44] = upper(c1);
-    lm[45] = upper(c2);
-    lm[46] = upper(g.eye_co);
-    lm[47] = lower_v(c2);
-    lm[48] = lower_v(c1);
-    lm[37] = upper(g.Mirror(g.eye_co));
-    lm[38] = upper(g.Mirror(c2));
-    lm[39] = upper(g.Mirror(c1));
-    lm[40] = upper(g.Mirror(g.eye_ci));
-    lm[41] = lower_v(g.Mirror(c1));
-    lm[42] = lower_v(g.Mirror(c2));
-    // Lips: outer contour by position, corners and inner contour on the slit.
-    const int mc = g.mouth_c, mr = g.Mirror(g.mouth_c);
-    lm[49] = face_id[node(g.r_mouth, mr)];
-    lm[55] = face_id[node(g.r_mouth, mc)];
-    const double up_x[5] = {-15.0, -7.0, 0.0, 7.0, 15.0};
-    const double up_y[5] = {y_mouth + 7.0, y_mouth + 9.5, y_mouth + 8.5, y_mouth + 9.5, y_mouth + 7.0};
-    for (int k = 0; k < 5; ++k) lm[50 + k] = nearest_xy(up_x[k], up_y[k]);
-    const double lo_x[5] = {15.0, 8.0, 0.0, -8.0, -15.0};
-    const double lo_y[5] = {y_mouth - 8.0, y_mouth - 10.5, y_mouth - 11.0, y_mouth - 10.5, y_mouth - 8.0};
-    for (int k = 0; k < 5; ++k) lm[56 + k] = nearest_xy(lo_x[k], lo_y[k]);
-    auto slit_col = [&](double x) {  // slit column nearest to frontal x
-      int best = g.c_centre;
-      for (int c = mr + 1; c < mc; ++c) {
-        if (std::abs(b.V[face_id[node(g.r_mouth, c)]].x() - x) < std::abs(b.V[face_id[node(g.r_mouth, best)]].x() - x)) best = c;
-      }
-      return best;
-    };
-    lm[61] = face_id[node(g.r_mouth, mr + 1)];
-    lm[65] = face_id[node(g.r_mouth, mc - 1)];
-    lm[62] = face_id[node(g.r_mouth, slit_col(-10.0))];
-    lm[63] = face_id[node(g.r_mouth, g.c_centre)];
-    lm[64] = face_id[node(g.r_mouth, slit_col(10.0))];
-    lm[66] = lower_id[node(g.r_mouth, slit_col(10.0))];
-    lm[67] = lower_id[node(g.r_mouth, g.c_centre)];
-    lm[68] = lower_id[node(g.r_mouth, slit_col(-10.0))];
-    for (int i = 1; i <= 68; ++i) {
-      Require(lm[i] >= 0, fmt::format("BuildProceduralRig: landmark ibug_{} was not placed", i));
-      rig.landmarks.push_back({names[i - 1], lm[i]});
-    }
+// ---------------------------------------------------------------------------
+// Landmarks (iBUG 68).
+
+// Where landmarks are looked for: the face part's interior vertices, with the
+// neutral's vertex normals `N`.
+struct LandmarkSearch {
+  const Grid& g;
+  const Builder& b;
+  MatX3d N;
+
+  bool InteriorFace(int v) const {
+    const VertexInfo& vi = b.info[v];
+    return vi.part == kFace && g.InteriorFaceNode(vi.r, vi.c);
   }
 
-  // --- Region masks: the standard ones from the landmarks, plus brows and lips. --
+  // Nearest front-facing face vertex to a frontal (x, y) target.
+  int NearestXy(double x, double y) const {
+    const int nv = static_cast<int>(b.V.size());
+    int best = -1;
+    double bd = 1e30;
+    for (int v = 0; v < nv; ++v) {
+      if (!InteriorFace(v) || b.V[v].z() < 0.0 || N(v, 2) < 0.25 || b.info[v].mouth_side < 0 || b.info[v].eye_side < 0) continue;
+      const double d = std::hypot(b.V[v].x() - x, b.V[v].y() - y);
+      if (d < bd) {
+        bd = d;
+        best = v;
+      }
+    }
+    return best;
+  }
+};
+
+// Jaw contour (ibug 1–17): the face outline seen from the front (the extreme
+// front-facing vertex along many directions in the image plane, from the subject's
+// right at ear level, under the chin, to the left), resampled to 17 points at
+// equal arc length as annotators space them.
+void PlaceJawContour(const LandmarkSearch& s, std::vector<int>& lm) {
+  const Builder& b = s.b;
+  const int nv = static_cast<int>(b.V.size());
+  std::vector<int> outline;
+  const Vector2d centre(0.0, -18.0);
+  for (int k = 0; k <= 360; ++k) {
+    const double a = (180.0 + 180.0 * k / 360.0) * kDeg;
+    const Vector2d dir(std::cos(a), std::sin(a));
+    int best = -1;
+    double bd = -1e30;
+    for (int v = 0; v < nv; ++v) {
+      if (!s.InteriorFace(v) || b.V[v].y() > -8.0 || b.info[v].mouth_side < 0 || s.N(v, 2) < 0.1) continue;
+      const double d = (Vector2d(b.V[v].x(), b.V[v].y()) - centre).dot(dir);
+      if (d > bd) {
+        bd = d;
+        best = v;
+      }
+    }
+    if (best >= 0 && (outline.empty() || outline.back() != best)) outline.push_back(best);
+  }
+  Require(outline.size() >= 17, "BuildProceduralRig: the face outline is too short for the jaw landmarks");
+  std::vector<double> arc(outline.size(), 0.0);
+  for (size_t i = 1; i < outline.size(); ++i) {
+    arc[i] = arc[i - 1] + (b.V[outline[i]] - b.V[outline[i - 1]]).head<2>().norm();
+  }
+  for (int k = 0; k < 17; ++k) {
+    const double target = arc.back() * k / 16.0;
+    size_t i = 0;
+    while (i + 1 < arc.size() && std::abs(arc[i + 1] - target) <= std::abs(arc[i] - target)) ++i;
+    lm[1 + k] = outline[i];
+  }
+}
+
+// Brows (18–22 the subject's right, outer to inner; 23–27 left, inner to outer),
+// the nose bridge 28–31 (nasion to tip) and the lower nose 32–36.
+void PlaceBrowAndNoseLandmarks(const LandmarkSearch& s, std::vector<int>& lm) {
+  const double brow_x[5] = {50, 42, 33, 24, 15}, brow_y[5] = {17, 23, 25.5, 25, 22};
+  for (int k = 0; k < 5; ++k) {
+    lm[18 + k] = s.NearestXy(-brow_x[k], brow_y[k]);
+    lm[27 - k] = s.NearestXy(brow_x[k], brow_y[k]);
+  }
+  const double bridge_y[4] = {0.0, -13.0, -27.0, -41.0};
+  for (int k = 0; k < 4; ++k) lm[28 + k] = s.NearestXy(0.0, bridge_y[k]);
+  const double nose_x[5] = {-13.0, -7.0, 0.0, 7.0, 13.0}, nose_y[5] = {-51.0, -54.0, -55.0, -54.0, -51.0};
+  for (int k = 0; k < 5; ++k) lm[32 + k] = s.NearestXy(nose_x[k], nose_y[k]);
+}
+
+// Eyes (37–48): corners and rim vertices of the slits (upper and lower at the same
+// columns, so that a blink brings them together).
+void PlaceEyeLandmarks(const Grid& g, const GridNodes& nodes, std::vector<int>& lm) {
+  auto col_at = [&](double frac) {  // left eye, fraction from inner to outer corner
+    return g.eye_ci + static_cast<int>(std::lround(frac * (g.eye_co - g.eye_ci)));
+  };
+  auto upper = [&](int c) { return nodes.Face(g.r_eye, c); };
+  auto lower_v = [&](int c) { return nodes.Lower(g.r_eye, c); };
+  const int c1 = col_at(1.0 / 3.0), c2 = col_at(2.0 / 3.0);
+  lm[43] = upper(g.eye_ci);
+  lm[44] = upper(c1);
+  lm[45] = upper(c2);
+  lm[46] = upper(g.eye_co);
+  lm[47] = lower_v(c2);
+  lm[48] = lower_v(c1);
+  lm[37] = upper(g.Mirror(g.eye_co));
+  lm[38] = upper(g.Mirror(c2));
+  lm[39] = upper(g.Mirror(c1));
+  lm[40] = upper(g.Mirror(g.eye_ci));
+  lm[41] = lower_v(g.Mirror(c1));
+  lm[42] = lower_v(g.Mirror(c2));
+}
+
+// Lips (49–68): outer contour by position, corners and inner contour on the slit.
+void PlaceLipLandmarks(const LandmarkSearch& s, const GridNodes& nodes, double y_mouth, std::vector<int>& lm) {
+  const Grid& g = s.g;
+  const Builder& b = s.b;
+  const int mc = g.mouth_c, mr = g.Mirror(g.mouth_c);
+  lm[49] = nodes.Face(g.r_mouth, mr);
+  lm[55] = nodes.Face(g.r_mouth, mc);
+  const double up_x[5] = {-15.0, -7.0, 0.0, 7.0, 15.0};
+  const double up_y[5] = {y_mouth + 7.0, y_mouth + 9.5, y_mouth + 8.5, y_mouth + 9.5, y_mouth + 7.0};
+  for (int k = 0; k < 5; ++k) lm[50 + k] = s.NearestXy(up_x[k], up_y[k]);
+  const double lo_x[5] = {15.0, 8.0, 0.0, -8.0, -15.0};
+  const double lo_y[5] = {y_mouth - 8.0, y_mouth - 10.5, y_mouth - 11.0, y_mouth - 10.5, y_mouth - 8.0};
+  for (int k = 0; k < 5; ++k) lm[56 + k] = s.NearestXy(lo_x[k], lo_y[k]);
+  auto slit_col = [&](double x) {  // slit column nearest to frontal x
+    int best = g.c_centre;
+    for (int c = mr + 1; c < mc; ++c) {
+      if (std::abs(b.V[nodes.Face(g.r_mouth, c)].x() - x) < std::abs(b.V[nodes.Face(g.r_mouth, best)].x() - x)) best = c;
+    }
+    return best;
+  };
+  lm[61] = nodes.Face(g.r_mouth, mr + 1);
+  lm[65] = nodes.Face(g.r_mouth, mc - 1);
+  lm[62] = nodes.Face(g.r_mouth, slit_col(-10.0));
+  lm[63] = nodes.Face(g.r_mouth, g.c_centre);
+  lm[64] = nodes.Face(g.r_mouth, slit_col(10.0));
+  lm[66] = nodes.Lower(g.r_mouth, slit_col(10.0));
+  lm[67] = nodes.Lower(g.r_mouth, g.c_centre);
+  lm[68] = nodes.Lower(g.r_mouth, slit_col(-10.0));
+}
+
+// Landmarks (iBUG 68) on the neutral of `rig`.
+void PlaceLandmarks(const Grid& g, const GridNodes& nodes, const Builder& b, double y_mouth, FaceRig& rig) {
+  const std::vector<std::string> names = IbugLandmarkNames();
+  std::vector<int> lm(69, -1);
+  const LandmarkSearch search{g, b, [&] {
+                                TriMesh m = rig.neutral;
+                                return VertexNormals(m);
+                              }()};
+  PlaceJawContour(search, lm);
+  PlaceBrowAndNoseLandmarks(search, lm);
+  PlaceEyeLandmarks(g, nodes, lm);
+  PlaceLipLandmarks(search, nodes, y_mouth, lm);
+  for (int i = 1; i <= 68; ++i) {
+    Require(lm[i] >= 0, fmt::format("BuildProceduralRig: landmark ibug_{} was not placed", i));
+    rig.landmarks.push_back({names[i - 1], lm[i]});
+  }
+}
+
+// ---------------------------------------------------------------------------
+// Region masks.
+
+// Landmark ibug_`i`'s texel position in a `size`² mask, and its neutral position.
+Vector2d LandmarkUv(const FaceRig& rig, int i, int size) {
+  const int v = rig.landmarks[rig.LandmarkIndex(fmt::format("ibug_{}", i))].vertex;
+  return Vector2d(rig.neutral.UV(v, 0) * size, rig.neutral.UV(v, 1) * size);
+}
+Vector3d LandmarkPosition(const FaceRig& rig, int i) {
+  const int v = rig.landmarks[rig.LandmarkIndex(fmt::format("ibug_{}", i))].vertex;
+  return Vector3d(rig.neutral.V.row(v).transpose());
+}
+
+// Brow hair along landmarks first…last: from just below to above the landmark
+// line, thicker medially.
+cv::Mat BrowMask(const FaceRig& rig, int size, double px_per_mm, int first, int last) {
+  auto uv_of = [&](int i) { return LandmarkUv(rig, i, size); };
+  std::vector<cv::Point> poly;
+  const int inner = first == 18 ? 22 : 23;
+  // Brow height ~9 mm at the head tapering to ~4 mm at the tail, the landmark
+  // line a little below its middle.
+  auto height = [&](int i) { return 4.0 + 5.0 * Gauss(std::abs(i - inner), 0.0, 1.6); };
+  for (int i = first; i <= last; ++i) {
+    const Vector2d q = uv_of(i) - Vector2d(0.0, 0.55 * height(i) * px_per_mm);
+    poly.emplace_back(cvRound(q.x()), cvRound(q.y()));
+  }
+  for (int i = last; i >= first; --i) {
+    const Vector2d q = uv_of(i) + Vector2d(0.0, 0.45 * height(i) * px_per_mm);
+    poly.emplace_back(cvRound(q.x()), cvRound(q.y()));
+  }
+  cv::Mat m = cv::Mat::zeros(size, size, CV_8UC1);
+  cv::fillPoly(m, std::vector<std::vector<cv::Point>>{poly}, cv::Scalar(255), cv::LINE_8);
+  return m;
+}
+
+// The convex hull of landmarks `ids`, scaled by `grow` about their centroid.
+cv::Mat HullMask(const FaceRig& rig, int size, std::initializer_list<int> ids, double grow) {
+  std::vector<Vector2d> pts;
+  Vector2d c = Vector2d::Zero();
+  for (int i : ids) {
+    pts.push_back(LandmarkUv(rig, i, size));
+    c += pts.back();
+  }
+  c /= static_cast<double>(pts.size());
+  std::vector<cv::Point> poly, h;
+  for (const auto& q : pts) {
+    const Vector2d g2 = c + grow * (q - c);
+    poly.emplace_back(cvRound(g2.x()), cvRound(g2.y()));
+  }
+  cv::convexHull(poly, h);
+  cv::Mat m = cv::Mat::zeros(size, size, CV_8UC1);
+  cv::fillConvexPoly(m, h, cv::Scalar(255));
+  return m;
+}
+
+// The lips: inside the outer lip contour (ibug 49–60).
+cv::Mat LipsMask(const FaceRig& rig, int size) {
+  std::vector<cv::Point> lips;
+  for (int i = 49; i <= 60; ++i) {
+    const Vector2d q = LandmarkUv(rig, i, size);
+    lips.emplace_back(cvRound(q.x()), cvRound(q.y()));
+  }
+  cv::Mat m = cv::Mat::zeros(size, size, CV_8UC1);
+  cv::fillPoly(m, std::vector<std::vector<cv::Point>>{lips}, cv::Scalar(255), cv::LINE_8);
+  return m;
+}
+
+// Region masks: the standard ones from the landmarks, plus brows and lips.
+void AddRegionMasks(const ProceduralRigOptions& options, FaceRig& rig) {
   rig.regions = RegionsFromLandmarks(rig, options.region_mask_size);
-  {
-    const int size = options.region_mask_size;
-    auto uv_of = [&](int i) {
-      const int v = rig.landmarks[rig.LandmarkIndex(fmt::format("ibug_{}", i))].vertex;
-      return Vector2d(rig.neutral.UV(v, 0) * size, rig.neutral.UV(v, 1) * size);
-    };
-    auto pos_of = [&](int i) {
-      const int v = rig.landmarks[rig.LandmarkIndex(fmt::format("ibug_{}", i))].vertex;
-      return Vector3d(rig.neutral.V.row(v).transpose());
-    };
-    // Texels per mm near the eyes (the chart is conformal, so roughly isotropic there).
-    const double px_per_mm = (uv_of(46) - uv_of(43)).norm() / (pos_of(46) - pos_of(43)).norm();
-    auto brow = [&](int first, int last) {
-      // Brow hair: from just below to above the landmark line, thicker medially.
-      std::vector<cv::Point> poly;
-      const int inner = first == 18 ? 22 : 23;
-      // Brow height ~9 mm at the head tapering to ~4 mm at the tail, the landmark
-      // line a little below its middle.
-      auto height = [&](int i) { return 4.0 + 5.0 * Gauss(std::abs(i - inner), 0.0, 1.6); };
-      for (int i = first; i <= last; ++i) {
-        const Vector2d q = uv_of(i) - Vector2d(0.0, 0.55 * height(i) * px_per_mm);
-        poly.emplace_back(cvRound(q.x()), cvRound(q.y()));
-      }
-      for (int i = last; i >= first; --i) {
-        const Vector2d q = uv_of(i) + Vector2d(0.0, 0.45 * height(i) * px_per_mm);
-        poly.emplace_back(cvRound(q.x()), cvRound(q.y()));
-      }
-      cv::Mat m = cv::Mat::zeros(size, size, CV_8UC1);
-      cv::fillPoly(m, std::vector<std::vector<cv::Point>>{poly}, cv::Scalar(255), cv::LINE_8);
-      return m;
-    };
-    // Cheeks: RegionsFromLandmarks' hulls include the opposite ala (ibug 32 for the
-    // left cheek) and so cross the nose; these stop at the own ala.
-    auto hull = [&](std::initializer_list<int> ids, double grow) {
-      std::vector<Vector2d> pts;
-      Vector2d c = Vector2d::Zero();
-      for (int i : ids) {
-        pts.push_back(uv_of(i));
-        c += pts.back();
-      }
-      c /= static_cast<double>(pts.size());
-      std::vector<cv::Point> poly, h;
-      for (const auto& q : pts) {
-        const Vector2d g2 = c + grow * (q - c);
-        poly.emplace_back(cvRound(g2.x()), cvRound(g2.y()));
-      }
-      cv::convexHull(poly, h);
-      cv::Mat m = cv::Mat::zeros(size, size, CV_8UC1);
-      cv::fillConvexPoly(m, h, cv::Scalar(255));
-      return m;
-    };
-    for (auto& r : rig.regions) {
-      if (r.name == "left_cheek") r.mask = hull({47, 48, 46, 16, 15, 14, 13, 55, 36}, 0.95);
-      if (r.name == "right_cheek") r.mask = hull({41, 42, 37, 2, 3, 4, 5, 49, 32}, 0.95);
-    }
-    rig.regions.push_back({"brow_left", brow(23, 27)});
-    rig.regions.push_back({"brow_right", brow(18, 22)});
-    std::vector<cv::Point> lips;
-    for (int i = 49; i <= 60; ++i) {
-      const Vector2d q = uv_of(i);
-      lips.emplace_back(cvRound(q.x()), cvRound(q.y()));
-    }
-    cv::Mat m = cv::Mat::zeros(size, size, CV_8UC1);
-    cv::fillPoly(m, std::vector<std::vector<cv::Point>>{lips}, cv::Scalar(255), cv::LINE_8);
-    rig.regions.push_back({"lips", m});
+  const int size = options.region_mask_size;
+  // Texels per mm near the eyes (the chart is conformal, so roughly isotropic there).
+  const double px_per_mm = (LandmarkUv(rig, 46, size) - LandmarkUv(rig, 43, size)).norm() /
+                           (LandmarkPosition(rig, 46) - LandmarkPosition(rig, 43)).norm();
+  // Cheeks: RegionsFromLandmarks' hulls include the opposite ala (ibug 32 for the
+  // left cheek) and so cross the nose; these stop at the own ala.
+  for (auto& r : rig.regions) {
+    if (r.name == "left_cheek") r.mask = HullMask(rig, size, {47, 48, 46, 16, 15, 14, 13, 55, 36}, 0.95);
+    if (r.name == "right_cheek") r.mask = HullMask(rig, size, {41, 42, 37, 2, 3, 4, 5, 49, 32}, 0.95);
   }
+  rig.regions.push_back({"brow_left", BrowMask(rig, size, px_per_mm, 23, 27)});
+  rig.regions.push_back({"brow_right", BrowMask(rig, size, px_per_mm, 18, 22)});
+  rig.regions.push_back({"lips", LipsMask(rig, size)});
+}
 
+}  // namespace
+
+FaceRig BuildProceduralRig(const ProceduralRigOptions& options) {
+  options.Check();
+  HeadModel head;
+  head.grid = MakeGrid(options);
+  head.hair_mm = options.hair_thickness_mm;
+  const Grid& g = head.grid;
+  Builder b;
+  const GridNodes nodes = AddHeadGrid(head, b);
+  AddEyeballs(options, b);
+  AddEars(b);
+  AddMouthCavity(b);
+  AddTeeth(b);
+  LayOutFaceChart(g, nodes, b);
+  OpenSlitsInUv(nodes, b);
+  FaceRig rig = RigFromBuilder(b);
+  const std::vector<int> mirror = MirrorMap(b);
+  const double y_mouth = StomionHeight(g, nodes, b);
+  AddExpressions(ExpressionDefs(y_mouth, options.jaw_open_deg * kDeg), head, b, mirror, rig);
+  AddIdentityModes(y_mouth, b, rig);
+  PlaceLandmarks(g, nodes, b, y_mouth, rig);
+  AddRegionMasks(options, rig);
   rig.source = "crease procedural head (synth/procedural_rig.cc), options " + OptionsToJson(options, -1);
   rig.Validate("procedural rig");
   return rig;
