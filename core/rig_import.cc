@@ -286,6 +286,158 @@ void AddLandmarks(const std::vector<int>& ids, const std::string& what, FaceRig*
   AddLandmarks(lms, what, rig);
 }
 
+// The OBJ files of a blendshape folder: the neutral and the identity and
+// expression shapes, each list sorted by name.
+struct ObjFolder {
+  fs::path neutral;
+  std::vector<ShapeFile> identity, expressions;
+};
+
+// Classifies the files of `folder`: the neutral (neutral.obj, else the one file
+// whose name contains "neutral"), identity modes (identity_N.obj or in identity/)
+// and expressions (the other files, or in expressions/).
+ObjFolder ClassifyObjFiles(const fs::path& folder, const RigImportOptions& options, RigImportReport* rep) {
+  ObjFolder files;
+  fs::path& neutral_path = files.neutral;
+  std::vector<ShapeFile>& identity = files.identity;
+  std::vector<ShapeFile>& expressions = files.expressions;
+  const std::regex identity_re("identity[_-]?[0-9]+", std::regex::icase);
+  std::vector<fs::path> neutral_candidates;
+  for (const auto& p : ObjFilesIn(folder)) {
+    std::string stem = p.stem().string(), lower = stem;
+    std::transform(lower.begin(), lower.end(), lower.begin(), ::tolower);
+    if (lower == "neutral" || lower.find("neutral") != std::string::npos) {
+      neutral_candidates.push_back(p);
+    } else if (std::regex_match(stem, identity_re)) {
+      identity.push_back({p, stem});
+    } else {
+      expressions.push_back({p, stem});
+    }
+  }
+  for (const auto& p : ObjFilesIn(folder / "identity")) identity.push_back({p, p.stem().string()});
+  for (const auto& p : ObjFilesIn(folder / "expressions")) expressions.push_back({p, p.stem().string()});
+  if (fs::exists(folder / "neutral.obj")) {
+    neutral_path = folder / "neutral.obj";
+  } else if (neutral_candidates.size() == 1) {
+    neutral_path = neutral_candidates[0];
+  } else if (neutral_candidates.empty()) {
+    throw Error(fmt::format("{}: no neutral shape found (expected neutral.obj)", folder.string()));
+  } else {
+    throw Error(fmt::format("{}: several files look like the neutral ({} and {}); name one neutral.obj",
+                            folder.string(), neutral_candidates[0].filename().string(),
+                            neutral_candidates[1].filename().string()));
+  }
+  for (const auto& p : neutral_candidates) {
+    if (p != neutral_path) {
+      rep->warnings.push_back(fmt::format("{} treated as an expression", p.filename().string()));
+      expressions.push_back({p, p.stem().string()});
+    }
+  }
+  std::sort(identity.begin(), identity.end(), [](auto& a, auto& b) { return a.name < b.name; });
+  std::sort(expressions.begin(), expressions.end(), [](auto& a, auto& b) { return a.name < b.name; });
+  if (options.max_identity_modes >= 0 && static_cast<int>(identity.size()) > options.max_identity_modes) {
+    identity.resize(static_cast<size_t>(options.max_identity_modes));
+  }
+  return files;
+}
+
+// The face region of the neutral `neutral_path` with `n_orig` vertices: per OBJ
+// vertex id, 1 = kept (options.parts, else face_vertices, else the range
+// [face_first, face_last)). In parts mode `part_of_original` gets each OBJ
+// vertex's index in options.parts (-1 = none).
+std::vector<char> FaceRegion(const RigImportOptions& options, int n_orig, const fs::path& neutral_path,
+                             std::vector<int>* part_of_original) {
+  std::vector<char> in_region(n_orig, 0);
+  if (!options.parts.empty()) {
+    part_of_original->assign(n_orig, -1);
+    for (size_t p = 0; p < options.parts.size(); ++p) {
+      for (const VertexRange& r : options.parts[p].ranges) {
+        Require(r.end <= n_orig, fmt::format("part '{}': vertex range [{}, {}) exceeds the {} vertices of {}",
+                                             options.parts[p].name, r.first, r.end, n_orig, neutral_path.string()));
+        for (int v = r.first; v < r.end; ++v) {
+          if ((*part_of_original)[v] >= 0) {
+            throw Error(fmt::format("vertex {} is in two parts ('{}' and '{}')", v,
+                                    options.parts[(*part_of_original)[v]].name, options.parts[p].name));
+          }
+          (*part_of_original)[v] = static_cast<int>(p);
+          in_region[v] = 1;
+        }
+      }
+    }
+  } else if (!options.face_vertices.empty()) {
+    for (int v : options.face_vertices) {
+      Require(v >= 0 && v < n_orig, fmt::format("face vertex id {} is out of range: {} has {} vertices",
+                                                v, neutral_path.string(), n_orig));
+      in_region[v] = 1;
+    }
+  } else {
+    const int last = options.face_last < 0 ? n_orig : options.face_last;
+    Require(last <= n_orig, fmt::format("face vertex range {}:{} exceeds the {} vertices of {}",
+                                        options.face_first, last, n_orig, neutral_path.string()));
+    std::fill(in_region.begin() + options.face_first, in_region.begin() + last, 1);
+  }
+  return in_region;
+}
+
+// Reads the shapes `files` in parallel into `basis` (3·#V × #files, deltas from
+// the neutral of `rig` in mm) and their names into `names`; each is checked
+// against the topology of the neutral OBJ `neutral_poly`.
+void ReadShapeBasis(const std::vector<ShapeFile>& files, const PolygonMesh& neutral_poly,
+                    const fs::path& neutral_path, const FaceRig& rig, const RigImportOptions& options,
+                    Eigen::MatrixXf* basis, std::vector<std::string>* names) {
+  const int nv = rig.num_vertices();
+  basis->resize(3 * nv, static_cast<Eigen::Index>(files.size()));
+  tbb::parallel_for(size_t{0}, files.size(), [&](size_t i) {
+    const PolygonMesh shape = ReadObjPolygons(files[i].path);
+    if (!SameTopology(neutral_poly, shape)) {
+      throw Error(fmt::format("{}: topology differs from the neutral {} ({} vs {} positions, {} vs {} faces)",
+                              files[i].path.string(), neutral_path.filename().string(),
+                              shape.positions.rows(), neutral_poly.positions.rows(),
+                              shape.face_offsets.size() - 1, neutral_poly.face_offsets.size() - 1));
+    }
+    const MatX3d V = GatherPositions(shape, rig.original_vertex) * options.units_to_mm;
+    if (!V.allFinite()) throw Error(fmt::format("{}: non-finite vertex coordinates", files[i].path.string()));
+    MatX3d D = V - rig.neutral.V;
+    if (options.zero_threshold_mm > 0) {
+      D = (D.array().abs() < options.zero_threshold_mm).select(0.0, D);
+    }
+    basis->col(static_cast<Eigen::Index>(i)) = Eigen::Map<const Eigen::VectorXd>(D.data(), D.size()).cast<float>();
+  });
+  for (const auto& f : files) names->push_back(f.name);
+}
+
+// Landmarks (OBJ vertex ids → the first rig vertex carrying that id): from
+// options.landmark_ids, else from the folder's landmarks.json (a list of the 68
+// iBUG ids or an object {name: id}), else none (with a warning).
+void ImportLandmarks(const fs::path& folder, const RigImportOptions& options, FaceRig* rig, RigImportReport* rep) {
+  const fs::path lm_path = folder / "landmarks.json";
+  if (!options.landmark_ids.empty()) {
+    AddLandmarks(options.landmark_ids, "--landmarks", rig);
+  } else if (fs::exists(lm_path)) {
+    const nlohmann::json j = ReadJsonFile(lm_path);
+    std::vector<std::pair<std::string, int>> lms;
+    if (j.is_array()) {
+      const auto names = IbugLandmarkNames();
+      Require(j.size() == 68, fmt::format("{}: a list of landmarks must hold the 68 iBUG vertex ids, has {}",
+                                          lm_path.string(), j.size()));
+      for (size_t i = 0; i < 68; ++i) {
+        Require(j[i].is_number_integer(), fmt::format("{}: entry {} is not a vertex id", lm_path.string(), i));
+        lms.emplace_back(names[i], j[i].get<int>());
+      }
+    } else if (j.is_object()) {
+      for (auto it = j.begin(); it != j.end(); ++it) {
+        Require(it->is_number_integer(), fmt::format("{}: landmark '{}' is not a vertex id", lm_path.string(), it.key()));
+        lms.emplace_back(it.key(), it->get<int>());
+      }
+    } else {
+      throw Error(fmt::format("{}: expected an object {{name: vertex id}} or a list of 68 ids", lm_path.string()));
+    }
+    AddLandmarks(lms, lm_path.string(), rig);
+  } else {
+    rep->warnings.push_back("no landmarks.json: the rig has no landmarks (the tracker needs the 68 iBUG landmarks)");
+  }
+}
+
 }  // namespace
 
 FaceRig ExtractParts(const FaceRig& rig, const std::vector<std::string>& parts) {
@@ -350,45 +502,8 @@ FaceRig ImportObjRig(const fs::path& folder, const RigImportOptions& options, Ri
                                                 folder.string()));
 
   // 1. Classify the files.
-  fs::path neutral_path;
-  std::vector<ShapeFile> identity, expressions;
-  const std::regex identity_re("identity[_-]?[0-9]+", std::regex::icase);
-  std::vector<fs::path> neutral_candidates;
-  for (const auto& p : ObjFilesIn(folder)) {
-    std::string stem = p.stem().string(), lower = stem;
-    std::transform(lower.begin(), lower.end(), lower.begin(), ::tolower);
-    if (lower == "neutral" || lower.find("neutral") != std::string::npos) {
-      neutral_candidates.push_back(p);
-    } else if (std::regex_match(stem, identity_re)) {
-      identity.push_back({p, stem});
-    } else {
-      expressions.push_back({p, stem});
-    }
-  }
-  for (const auto& p : ObjFilesIn(folder / "identity")) identity.push_back({p, p.stem().string()});
-  for (const auto& p : ObjFilesIn(folder / "expressions")) expressions.push_back({p, p.stem().string()});
-  if (fs::exists(folder / "neutral.obj")) {
-    neutral_path = folder / "neutral.obj";
-  } else if (neutral_candidates.size() == 1) {
-    neutral_path = neutral_candidates[0];
-  } else if (neutral_candidates.empty()) {
-    throw Error(fmt::format("{}: no neutral shape found (expected neutral.obj)", folder.string()));
-  } else {
-    throw Error(fmt::format("{}: several files look like the neutral ({} and {}); name one neutral.obj",
-                            folder.string(), neutral_candidates[0].filename().string(),
-                            neutral_candidates[1].filename().string()));
-  }
-  for (const auto& p : neutral_candidates) {
-    if (p != neutral_path) {
-      rep.warnings.push_back(fmt::format("{} treated as an expression", p.filename().string()));
-      expressions.push_back({p, p.stem().string()});
-    }
-  }
-  std::sort(identity.begin(), identity.end(), [](auto& a, auto& b) { return a.name < b.name; });
-  std::sort(expressions.begin(), expressions.end(), [](auto& a, auto& b) { return a.name < b.name; });
-  if (options.max_identity_modes >= 0 && static_cast<int>(identity.size()) > options.max_identity_modes) {
-    identity.resize(static_cast<size_t>(options.max_identity_modes));
-  }
+  const ObjFolder files = ClassifyObjFiles(folder, options, &rep);
+  const fs::path& neutral_path = files.neutral;
 
   // 2. The neutral defines topology, seams and the face region.
   const PolygonMesh neutral_poly = ReadObjPolygons(neutral_path);
@@ -398,36 +513,8 @@ FaceRig ImportObjRig(const fs::path& folder, const RigImportOptions& options, Ri
   TriangulatedMesh tm = TriangulateAndSplitSeams(neutral_poly, neutral_path.string());
   const int n_orig = static_cast<int>(neutral_poly.positions.rows());
   rep.original_vertices = n_orig;
-  std::vector<char> in_region(n_orig, 0);
   std::vector<int> part_of_original;  // parts mode: OBJ vertex id → index in options.parts, -1 = none
-  if (!options.parts.empty()) {
-    part_of_original.assign(n_orig, -1);
-    for (size_t p = 0; p < options.parts.size(); ++p) {
-      for (const VertexRange& r : options.parts[p].ranges) {
-        Require(r.end <= n_orig, fmt::format("part '{}': vertex range [{}, {}) exceeds the {} vertices of {}",
-                                             options.parts[p].name, r.first, r.end, n_orig, neutral_path.string()));
-        for (int v = r.first; v < r.end; ++v) {
-          if (part_of_original[v] >= 0) {
-            throw Error(fmt::format("vertex {} is in two parts ('{}' and '{}')", v,
-                                    options.parts[part_of_original[v]].name, options.parts[p].name));
-          }
-          part_of_original[v] = static_cast<int>(p);
-          in_region[v] = 1;
-        }
-      }
-    }
-  } else if (!options.face_vertices.empty()) {
-    for (int v : options.face_vertices) {
-      Require(v >= 0 && v < n_orig, fmt::format("face vertex id {} is out of range: {} has {} vertices",
-                                                v, neutral_path.string(), n_orig));
-      in_region[v] = 1;
-    }
-  } else {
-    const int last = options.face_last < 0 ? n_orig : options.face_last;
-    Require(last <= n_orig, fmt::format("face vertex range {}:{} exceeds the {} vertices of {}",
-                                        options.face_first, last, n_orig, neutral_path.string()));
-    std::fill(in_region.begin() + options.face_first, in_region.begin() + last, 1);
-  }
+  const std::vector<char> in_region = FaceRegion(options, n_orig, neutral_path, &part_of_original);
   rep.face_region_vertices = static_cast<int>(std::count(in_region.begin(), in_region.end(), 1));
   CropToRegion(&tm, in_region, &rep.dropped_triangles);
   Require(tm.mesh.num_faces() > 0, fmt::format("{}: no triangle lies entirely in the face region",
@@ -442,62 +529,16 @@ FaceRig ImportObjRig(const fs::path& folder, const RigImportOptions& options, Ri
   if (!options.parts.empty()) AssignParts(options.parts, part_of_original, &rig, &rep);
   if (options.flip_v) rig.neutral.UV.col(1) = (1.0 - rig.neutral.UV.col(1).array()).matrix();
   rig.source = fmt::format("imported from {} ({} OBJ files, units x{} to mm)", folder.string(),
-                           1 + identity.size() + expressions.size(), options.units_to_mm);
+                           1 + files.identity.size() + files.expressions.size(), options.units_to_mm);
 
   // 3. All shapes, read in parallel; each checked against the neutral's topology.
-  const int nv = rig.num_vertices();
-  auto read_basis = [&](const std::vector<ShapeFile>& files, Eigen::MatrixXf* basis,
-                        std::vector<std::string>* names) {
-    basis->resize(3 * nv, static_cast<Eigen::Index>(files.size()));
-    tbb::parallel_for(size_t{0}, files.size(), [&](size_t i) {
-      const PolygonMesh shape = ReadObjPolygons(files[i].path);
-      if (!SameTopology(neutral_poly, shape)) {
-        throw Error(fmt::format("{}: topology differs from the neutral {} ({} vs {} positions, {} vs {} faces)",
-                                files[i].path.string(), neutral_path.filename().string(),
-                                shape.positions.rows(), neutral_poly.positions.rows(),
-                                shape.face_offsets.size() - 1, neutral_poly.face_offsets.size() - 1));
-      }
-      const MatX3d V = GatherPositions(shape, rig.original_vertex) * options.units_to_mm;
-      if (!V.allFinite()) throw Error(fmt::format("{}: non-finite vertex coordinates", files[i].path.string()));
-      MatX3d D = V - rig.neutral.V;
-      if (options.zero_threshold_mm > 0) {
-        D = (D.array().abs() < options.zero_threshold_mm).select(0.0, D);
-      }
-      basis->col(static_cast<Eigen::Index>(i)) = Eigen::Map<const Eigen::VectorXd>(D.data(), D.size()).cast<float>();
-    });
-    for (const auto& f : files) names->push_back(f.name);
-  };
-  read_basis(identity, &rig.identity_basis, &rig.identity_names);
-  read_basis(expressions, &rig.expression_basis, &rig.expression_names);
-  rep.obj_files = 1 + static_cast<int>(identity.size() + expressions.size());
+  ReadShapeBasis(files.identity, neutral_poly, neutral_path, rig, options, &rig.identity_basis, &rig.identity_names);
+  ReadShapeBasis(files.expressions, neutral_poly, neutral_path, rig, options, &rig.expression_basis,
+                 &rig.expression_names);
+  rep.obj_files = 1 + static_cast<int>(files.identity.size() + files.expressions.size());
 
   // 4. Landmarks (OBJ vertex ids → the first rig vertex carrying that id).
-  const fs::path lm_path = folder / "landmarks.json";
-  if (!options.landmark_ids.empty()) {
-    AddLandmarks(options.landmark_ids, "--landmarks", &rig);
-  } else if (fs::exists(lm_path)) {
-    const nlohmann::json j = ReadJsonFile(lm_path);
-    std::vector<std::pair<std::string, int>> lms;
-    if (j.is_array()) {
-      const auto names = IbugLandmarkNames();
-      Require(j.size() == 68, fmt::format("{}: a list of landmarks must hold the 68 iBUG vertex ids, has {}",
-                                          lm_path.string(), j.size()));
-      for (size_t i = 0; i < 68; ++i) {
-        Require(j[i].is_number_integer(), fmt::format("{}: entry {} is not a vertex id", lm_path.string(), i));
-        lms.emplace_back(names[i], j[i].get<int>());
-      }
-    } else if (j.is_object()) {
-      for (auto it = j.begin(); it != j.end(); ++it) {
-        Require(it->is_number_integer(), fmt::format("{}: landmark '{}' is not a vertex id", lm_path.string(), it.key()));
-        lms.emplace_back(it.key(), it->get<int>());
-      }
-    } else {
-      throw Error(fmt::format("{}: expected an object {{name: vertex id}} or a list of 68 ids", lm_path.string()));
-    }
-    AddLandmarks(lms, lm_path.string(), &rig);
-  } else {
-    rep.warnings.push_back("no landmarks.json: the rig has no landmarks (the tracker needs the 68 iBUG landmarks)");
-  }
+  ImportLandmarks(folder, options, &rig, &rep);
 
   // 5. Regions from the landmarks.
   if (rig.LandmarkIndex("ibug_68") >= 0) {
