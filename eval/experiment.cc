@@ -870,26 +870,35 @@ struct PlannedExperiment {
 void CollectExperiment(PlannedExperiment& p, const std::map<std::string, size_t>& index,
                        const std::vector<int>& done, const std::vector<std::string>& failure);
 
-}  // namespace
-
-std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& jobs, const StageExecutor& executor) {
-  const auto t_start = std::chrono::steady_clock::now();
-  Require(!jobs.empty(), "no experiments to run");
-  const ExperimentRunnerOptions& first = jobs.front().options;
-  auto log = [&](const std::string& s) {
-    if (first.log) first.log(s);
-  };
-  Require(first.jobs >= 1, "--jobs must be ≥ 1");
-  for (const auto& j : jobs)
-    Require(j.options.cache == first.cache && j.options.jobs == first.jobs,
-            "experiments run together must share their cache and --jobs");
-
-  // Plan: the stages of every run of every experiment, deduplicated by key (a sweep
-  // over capture options shares rig, scans, pairs, model, tracker and sequences;
-  // experiments share their base stages).
+// The stages of every run of every experiment of a RunExperiments call,
+// deduplicated by key, and their states.
+struct StagePlan {
   std::vector<PlannedExperiment> planned;
   std::vector<ExperimentStage> unique;
-  std::map<std::string, size_t> index;
+  std::map<std::string, size_t> index;  // key → position in `unique`
+  std::vector<int> state;               // StageState of each unique stage
+  std::vector<std::string> failure;     // why a failed stage failed
+  std::set<std::string> cached_keys;    // stages done before this call
+};
+
+void Log(const ExperimentRunnerOptions& options, const std::string& s) {
+  if (options.log) options.log(s);
+}
+
+// The keys of the stages an experiment's runs use.
+std::set<std::string> OwnKeys(const PlannedExperiment& p) {
+  std::set<std::string> own;
+  for (const auto& stages : p.run_stages)
+    for (const auto& s : stages) own.insert(s.key);
+  return own;
+}
+
+// Plan: the stages of every run of every experiment, deduplicated by key (a sweep
+// over capture options shares rig, scans, pairs, model, tracker and sequences;
+// experiments share their base stages).
+StagePlan PlanStages(const std::vector<ExperimentJob>& jobs) {
+  const ExperimentRunnerOptions& first = jobs.front().options;
+  StagePlan plan;
   for (const auto& job : jobs) {
     PlannedExperiment p;
     p.options = &job.options;
@@ -903,142 +912,190 @@ std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& 
       p.run_stages.push_back(PlanRunStages(r, first.cache, job.options.program_version));
       for (const auto& s : p.run_stages.back()) {
         own.insert(s.key);
-        if (index.count(s.key)) continue;
-        index[s.key] = unique.size();
-        unique.push_back(s);
+        if (plan.index.count(s.key)) continue;
+        plan.index[s.key] = plan.unique.size();
+        plan.unique.push_back(s);
       }
     }
     p.summary.runs = static_cast<int>(p.runs.size());
     p.summary.stages = static_cast<int>(own.size());
-    planned.push_back(std::move(p));
+    plan.planned.push_back(std::move(p));
   }
+  plan.state.assign(plan.unique.size(), kPending);
+  plan.failure.assign(plan.unique.size(), "");
+  return plan;
+}
 
-  std::vector<int> state(unique.size(), kPending);
-  std::vector<std::string> failure(unique.size());
+// Marks the stages the cache holds (a stage.json with the same key inputs) done,
+// and logs each experiment's plan (to `first`'s log: the first job's).
+void FindCachedStages(StagePlan& plan, const ExperimentRunnerOptions& first) {
+  const std::vector<ExperimentStage>& unique = plan.unique;
   for (size_t i = 0; i < unique.size(); ++i) {
     const fs::path done = unique[i].dir / "stage.json";
     if (fs::exists(done)) {
       try {
-        if (ReadJsonFile(done).at("key_inputs") == unique[i].key_inputs) state[i] = kDone;
+        if (ReadJsonFile(done).at("key_inputs") == unique[i].key_inputs) plan.state[i] = kDone;
       } catch (const std::exception&) {
         // unreadable: rebuilt below
       }
     }
   }
-  std::set<std::string> cached_keys;
   for (size_t i = 0; i < unique.size(); ++i)
-    if (state[i] == kDone) cached_keys.insert(unique[i].key);
-  for (auto& p : planned) {
-    std::set<std::string> own;
-    for (const auto& stages : p.run_stages)
-      for (const auto& s : stages) own.insert(s.key);
-    for (const auto& k : own) p.summary.stages_cached += cached_keys.count(k) ? 1 : 0;
-    log(fmt::format("{}: {} runs{}, {} stages ({} cached)", p.config.name, p.runs.size(),
-                    p.options->num_shards > 1 ? fmt::format(" (shard {}/{} of {})", p.options->shard + 1,
-                                                            p.options->num_shards, p.total_runs)
-                                              : "",
-                    p.summary.stages, p.summary.stages_cached));
+    if (plan.state[i] == kDone) plan.cached_keys.insert(unique[i].key);
+  for (auto& p : plan.planned) {
+    for (const auto& k : OwnKeys(p)) p.summary.stages_cached += plan.cached_keys.count(k) ? 1 : 0;
+    Log(first, fmt::format("{}: {} runs{}, {} stages ({} cached)", p.config.name, p.runs.size(),
+                           p.options->num_shards > 1 ? fmt::format(" (shard {}/{} of {})", p.options->shard + 1,
+                                                                   p.options->num_shards, p.total_runs)
+                                                     : "",
+                           p.summary.stages, p.summary.stages_cached));
   }
+}
 
-  std::mutex mutex;
-  std::condition_variable cv;
-  int running = 0;
-  bool exclusive_running = false;
-  auto worker = [&] {
-    std::unique_lock<std::mutex> lock(mutex);
-    for (;;) {
-      // The first pending stage whose inputs are done; fail those whose inputs failed.
-      // An exclusive stage (a timed capture) starts only when nothing else runs, and
-      // nothing starts beside it; once one is ready, no new stage starts before it.
-      size_t pick = unique.size();
-      bool any_pending = false;
-      for (size_t i = 0; i < unique.size() && !exclusive_running; ++i) {
-        if (state[i] != kPending) continue;
-        bool ready = true, failed = false;
-        for (const auto& dep : unique[i].depends) {
-          const int ds = state[index.at(dep)];
-          failed = failed || ds == kFailed;
-          ready = ready && ds == kDone;
-        }
-        if (failed) {
-          state[i] = kFailed;
-          failure[i] = "an input stage failed";
-          cv.notify_all();
-          continue;
-        }
-        any_pending = true;
-        if (ready) {
-          pick = i;
-          break;
-        }
-      }
-      if (pick != unique.size() && unique[pick].exclusive && running > 0) pick = unique.size();  // wait for quiet
-      if (exclusive_running) any_pending = true;
-      if (pick == unique.size()) {
-        if (!any_pending) {
-          cv.notify_all();
-          return;
-        }
-        cv.wait(lock);
-        continue;
-      }
-      state[pick] = kRunning;
-      ++running;
-      exclusive_running = unique[pick].exclusive;
-      const ExperimentStage& s = unique[pick];
-      log(fmt::format("  {} {} …  {}", s.kind, s.key, ExperimentCommandLine(s.argv)));
-      lock.unlock();
-      std::string error;
-      const auto t0 = std::chrono::steady_clock::now();
-      try {
-        std::error_code ec;
-        fs::remove_all(s.dir, ec);  // an incomplete folder of an earlier, interrupted run
-        fs::create_directories(s.dir);
-        const int rc = executor(s.argv, s.dir / "log.txt");
-        if (rc != 0) {
-          error = fmt::format("{} stage failed (exit status {}): {}\n{}", s.kind, rc, ExperimentCommandLine(s.argv),
-                              TailOfFile(s.dir / "log.txt", 1500));
-        } else {
-          const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-          WriteJsonFile(s.dir / "stage.json", json{{"kind", s.kind},
-                                                   {"key", s.key},
-                                                   {"key_inputs", s.key_inputs},
-                                                   {"command", ExperimentCommandLine(s.argv)},
-                                                   {"seconds", seconds}});
-        }
-      } catch (const std::exception& e) {
-        error = fmt::format("{} stage: {}", s.kind, e.what());
-      }
-      lock.lock();
-      --running;
-      if (unique[pick].exclusive) exclusive_running = false;
-      if (error.empty()) {
-        state[pick] = kDone;
-      } else {
-        state[pick] = kFailed;
-        failure[pick] = error;
-        log("  FAILED: " + error);
-      }
-      cv.notify_all();
+// Runs one stage in a fresh folder and records it in its stage.json; returns the
+// error, empty if the stage succeeded.
+std::string ExecuteStage(const ExperimentStage& s, const StageExecutor& executor) {
+  std::string error;
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    std::error_code ec;
+    fs::remove_all(s.dir, ec);  // an incomplete folder of an earlier, interrupted run
+    fs::create_directories(s.dir);
+    const int rc = executor(s.argv, s.dir / "log.txt");
+    if (rc != 0) {
+      error = fmt::format("{} stage failed (exit status {}): {}\n{}", s.kind, rc, ExperimentCommandLine(s.argv),
+                          TailOfFile(s.dir / "log.txt", 1500));
+    } else {
+      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      WriteJsonFile(s.dir / "stage.json", json{{"kind", s.kind},
+                                               {"key", s.key},
+                                               {"key_inputs", s.key_inputs},
+                                               {"command", ExperimentCommandLine(s.argv)},
+                                               {"seconds", seconds}});
     }
-  };
-  {
+  } catch (const std::exception& e) {
+    error = fmt::format("{} stage: {}", s.kind, e.what());
+  }
+  return error;
+}
+
+// Runs the pending stages of a plan on worker threads, each stage once its input
+// stages are done.
+class StageScheduler {
+ public:
+  StageScheduler(StagePlan& plan, const StageExecutor& executor, const ExperimentRunnerOptions& options)
+      : plan_(plan), executor_(executor), options_(options) {}
+
+  void Run(int jobs) {
     std::vector<std::thread> threads;
-    for (int j = 0; j < first.jobs; ++j) threads.emplace_back(worker);
+    for (int j = 0; j < jobs; ++j) threads.emplace_back([this] { Work(); });
     for (auto& t : threads) t.join();
   }
 
-  std::vector<ExperimentSummary> summaries;
-  for (auto& p : planned) {
-    std::set<std::string> own;
-    for (const auto& stages : p.run_stages)
-      for (const auto& s : stages) own.insert(s.key);
-    for (const auto& k : own) {
-      const size_t i = index.at(k);
-      if (state[i] == kFailed) ++p.summary.stages_failed;
-      if (state[i] == kDone && !cached_keys.count(k)) ++p.summary.stages_run;
+ private:
+  // The first pending stage whose inputs are done; fail those whose inputs failed.
+  // An exclusive stage (a timed capture) starts only when nothing else runs, and
+  // nothing starts beside it; once one is ready, no new stage starts before it.
+  // Returns unique.size() when none may start now; `any_pending` tells whether one
+  // may start later. Called under the lock.
+  size_t PickStage(bool* any_pending) {
+    const std::vector<ExperimentStage>& unique = plan_.unique;
+    std::vector<int>& state = plan_.state;
+    size_t pick = unique.size();
+    *any_pending = false;
+    for (size_t i = 0; i < unique.size() && !exclusive_running_; ++i) {
+      if (state[i] != kPending) continue;
+      bool ready = true, failed = false;
+      for (const auto& dep : unique[i].depends) {
+        const int ds = state[plan_.index.at(dep)];
+        failed = failed || ds == kFailed;
+        ready = ready && ds == kDone;
+      }
+      if (failed) {
+        state[i] = kFailed;
+        plan_.failure[i] = "an input stage failed";
+        cv_.notify_all();
+        continue;
+      }
+      *any_pending = true;
+      if (ready) {
+        pick = i;
+        break;
+      }
     }
-    CollectExperiment(p, index, state, failure);
+    if (pick != unique.size() && unique[pick].exclusive && running_ > 0) pick = unique.size();  // wait for quiet
+    if (exclusive_running_) *any_pending = true;
+    return pick;
+  }
+
+  // A worker thread: picks, runs and records stages until none is left.
+  void Work() {
+    const std::vector<ExperimentStage>& unique = plan_.unique;
+    std::unique_lock<std::mutex> lock(mutex_);
+    for (;;) {
+      bool any_pending = false;
+      const size_t pick = PickStage(&any_pending);
+      if (pick == unique.size()) {
+        if (!any_pending) {
+          cv_.notify_all();
+          return;
+        }
+        cv_.wait(lock);
+        continue;
+      }
+      plan_.state[pick] = kRunning;
+      ++running_;
+      exclusive_running_ = unique[pick].exclusive;
+      const ExperimentStage& s = unique[pick];
+      Log(options_, fmt::format("  {} {} …  {}", s.kind, s.key, ExperimentCommandLine(s.argv)));
+      lock.unlock();
+      const std::string error = ExecuteStage(s, executor_);
+      lock.lock();
+      --running_;
+      if (unique[pick].exclusive) exclusive_running_ = false;
+      if (error.empty()) {
+        plan_.state[pick] = kDone;
+      } else {
+        plan_.state[pick] = kFailed;
+        plan_.failure[pick] = error;
+        Log(options_, "  FAILED: " + error);
+      }
+      cv_.notify_all();
+    }
+  }
+
+  StagePlan& plan_;
+  const StageExecutor& executor_;
+  const ExperimentRunnerOptions& options_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  int running_ = 0;
+  bool exclusive_running_ = false;
+};
+
+}  // namespace
+
+std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& jobs, const StageExecutor& executor) {
+  const auto t_start = std::chrono::steady_clock::now();
+  Require(!jobs.empty(), "no experiments to run");
+  const ExperimentRunnerOptions& first = jobs.front().options;
+  Require(first.jobs >= 1, "--jobs must be ≥ 1");
+  for (const auto& j : jobs)
+    Require(j.options.cache == first.cache && j.options.jobs == first.jobs,
+            "experiments run together must share their cache and --jobs");
+
+  StagePlan plan = PlanStages(jobs);
+  FindCachedStages(plan, first);
+  StageScheduler(plan, executor, first).Run(first.jobs);
+
+  std::vector<ExperimentSummary> summaries;
+  for (auto& p : plan.planned) {
+    for (const auto& k : OwnKeys(p)) {
+      const size_t i = plan.index.at(k);
+      if (plan.state[i] == kFailed) ++p.summary.stages_failed;
+      if (plan.state[i] == kDone && !plan.cached_keys.count(k)) ++p.summary.stages_run;
+    }
+    CollectExperiment(p, plan.index, plan.state, plan.failure);
     p.summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
     summaries.push_back(p.summary);
   }
