@@ -476,14 +476,23 @@ std::string ExperimentKey(const json& j) {
   return fmt::format("{:016x}", h);
 }
 
-std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::path& cache,
-                                           const std::string& program_version) {
-  const ExperimentConfig& c = run.resolved;
-  const ExperimentDataset d = DatasetOf(c);
-  const int64_t seed_offset = 1000 * static_cast<int64_t>(run.seed - 1);
+namespace {
+
+using ArgvOfDir = std::function<std::vector<std::string>(const fs::path&)>;
+
+// The stages of one run under construction.
+struct RunPlan {
+  const ExperimentConfig& c;
+  ExperimentDataset d;
+  int64_t seed_offset = 0;  // added to the dataset's seeds: 1000 per seed of the run after the first
+  fs::path cache;
+  std::string program_version;
   std::vector<ExperimentStage> stages;
-  auto add = [&](const std::string& kind, json inputs, std::vector<std::string> depends,
-                 const std::function<std::vector<std::string>(const fs::path&)>& argv) -> const ExperimentStage& {
+
+  // Adds a stage whose key hashes `inputs` with its kind, the program version, the
+  // cache salt and the keys it `depends` on; `argv` gets the stage's folder.
+  const ExperimentStage& Add(const std::string& kind, json inputs, std::vector<std::string> depends,
+                             const ArgvOfDir& argv) {
     inputs["stage"] = kind;
     inputs["crease"] = program_version;
     inputs["salt"] = d.cache_salt;
@@ -497,16 +506,26 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
     s.depends = std::move(depends);
     stages.push_back(std::move(s));
     return stages.back();
-  };
+  }
+};
 
-  const ExperimentStage rig = add("rig", {{"rig", KeySectionOf(c, "rig")}}, {}, [&](const fs::path& dir) {
+fs::path RigFile(const ExperimentStage& rig) { return rig.dir / "rig.crig"; }
+
+ExperimentStage PlanRigStage(RunPlan& p) {
+  const ExperimentConfig& c = p.c;
+  return p.Add("rig", {{"rig", KeySectionOf(c, "rig")}}, {}, [&](const fs::path& dir) {
     std::vector<std::string> a = {"synth", "rig", "-o", (dir / "rig.crig").string()};
     AppendSets(SectionOf(c, "rig"), &a);
     return a;
   });
-  const fs::path rig_file = rig.dir / "rig.crig";
+}
 
-  const int64_t training_seed = d.training_seed + seed_offset;
+// The training scans of the run's training actors.
+ExperimentStage PlanScanStage(RunPlan& p, const ExperimentStage& rig) {
+  const ExperimentConfig& c = p.c;
+  const ExperimentDataset& d = p.d;
+  const fs::path rig_file = RigFile(rig);
+  const int64_t training_seed = d.training_seed + p.seed_offset;
   std::vector<std::string> expressions = d.scan_expressions;
   // The first N expressions (all N of the list: the same scans, the same key).
   const size_t listed = expressions.empty() ? ScanSetOptions().expressions.size() : expressions.size();
@@ -522,7 +541,7 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
                       {"expressions", expressions},
                       {"samples", d.scan_samples}};
   if (!d.scan_size.empty()) scan_inputs["size"] = d.scan_size;  // (absent: the keys of earlier caches)
-  const ExperimentStage scans = add(
+  return p.Add(
       "scans", scan_inputs, {rig.key}, [&](const fs::path& dir) {
         std::vector<std::string> a = {"synth",     "scans",  "--rig",     rig_file.string(),
                                       "--actors",  std::to_string(d.training_actors),
@@ -539,10 +558,16 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
         a.insert(a.end(), {"--overwrite", "-o", (dir / "scans").string()});
         return a;
       });
+}
 
-  // Training in two stages: the pairs (Sec. 4.1–4.2, ~99 % of the time) and the
-  // regression (Sec. 4.3), so that sweeps over the PCA dimension or the cascade's
-  // K, F, P, β share the extraction.
+// Training in two stages: the pairs (Sec. 4.1–4.2, ~99 % of the time) and the
+// regression (Sec. 4.3), so that sweeps over the PCA dimension or the cascade's
+// K, F, P, β share the extraction; and, if asked, leave-one-actor-out on the
+// pairs. Returns the model stage.
+ExperimentStage PlanTrainingStages(RunPlan& p, const ExperimentStage& rig, const ExperimentStage& scans) {
+  const ExperimentConfig& c = p.c;
+  const ExperimentDataset& d = p.d;
+  const fs::path rig_file = RigFile(rig);
   const auto split_regression = [](json* extraction, json* regression) {
     for (const auto& name : RegressionOptionNames()) {
       if (!extraction->contains(name)) continue;
@@ -555,7 +580,7 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
   json extraction_key = KeySectionOf(c, "training"), regression_key = json::object();
   split_regression(&extraction_key, &regression_key);
   const ExperimentStage pairs =
-      add("pairs", {{"training", extraction_key}}, {rig.key, scans.key}, [&](const fs::path& dir) {
+      p.Add("pairs", {{"training", extraction_key}}, {rig.key, scans.key}, [&](const fs::path& dir) {
         std::vector<std::string> a = {"train",         "--scans", (scans.dir / "scans").string(),
                                       "--rig",         rig_file.string(),
                                       "--save-pairs",  (dir / "pairs.cpr").string(),
@@ -564,27 +589,32 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
         return a;
       });
   const ExperimentStage model =
-      add("model", {{"training", regression_key}}, {pairs.key}, [&](const fs::path& dir) {
+      p.Add("model", {{"training", regression_key}}, {pairs.key}, [&](const fs::path& dir) {
         std::vector<std::string> a = {"train", "--pairs", (pairs.dir / "pairs.cpr").string(), "--out",
                                       (dir / "model.cdm").string(), "--report", (dir / "report").string()};
         AppendSets(regression, &a);
         return a;
       });
   if (d.leave_one_actor_out) {
-    add("loao", {{"training", regression_key}, {"regressors", d.loao_regressors}}, {pairs.key},
-        [&](const fs::path& dir) {
-          std::vector<std::string> a = {"model", "loao", "--pairs", (pairs.dir / "pairs.cpr").string(), "--regressors",
-                                        Join(d.loao_regressors, ","), "--json", (dir / "loao.json").string()};
-          AppendSets(regression, &a);
-          return a;
-        });
+    p.Add("loao", {{"training", regression_key}, {"regressors", d.loao_regressors}}, {pairs.key},
+          [&](const fs::path& dir) {
+            std::vector<std::string> a = {"model", "loao", "--pairs", (pairs.dir / "pairs.cpr").string(), "--regressors",
+                                          Join(d.loao_regressors, ","), "--json", (dir / "loao.json").string()};
+            AppendSets(regression, &a);
+            return a;
+          });
   }
-  if (!d.capture) return stages;
+  return model;
+}
 
-  std::string tracker_key;
-  fs::path tracker_file;
-  if (d.landmarks == "regressor") {
-    const ExperimentStage tracker = add("tracker", {{"tracker", KeySectionOf(c, "tracker")}, {"seed", d.tracker_seed}},
+// The landmark regressor for capture (landmarks: regressor); returns its key and
+// file, empty for the other landmark sources.
+std::pair<std::string, fs::path> PlanTrackerStage(RunPlan& p, const ExperimentStage& rig) {
+  const ExperimentConfig& c = p.c;
+  const ExperimentDataset& d = p.d;
+  const fs::path rig_file = RigFile(rig);
+  if (d.landmarks != "regressor") return {};
+  const ExperimentStage tracker = p.Add("tracker", {{"tracker", KeySectionOf(c, "tracker")}, {"seed", d.tracker_seed}},
                                         {rig.key}, [&](const fs::path& dir) {
                                           std::vector<std::string> a = {"train-tracker", "--rig", rig_file.string(),
                                                                         "-o", (dir / "tracker.ctrk").string(),
@@ -592,92 +622,127 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::p
                                           AppendSets(SectionOf(c, "tracker"), &a);
                                           return a;
                                         });
-    tracker_key = tracker.key;
-    tracker_file = tracker.dir / "tracker.ctrk";
-  }
+  return {tracker.key, tracker.dir / "tracker.ctrk"};
+}
 
-  for (int i = 0; i < d.test_actors; ++i) {
-    const int64_t actor_seed = d.test_seed + seed_offset + i;
-    const ExperimentStage actor =
-        add("actor", {{"actor", KeySectionOf(c, "test_actor")}, {"seed", actor_seed}}, {rig.key}, [&](const fs::path& dir) {
-          std::vector<std::string> a = {"synth", "actor", "--rig", rig_file.string(), "--seed", std::to_string(actor_seed),
-                                        "-o", (dir / "actor.json").string()};
-          AppendSets(SectionOf(c, "test_actor"), &a);
-          return a;
-        });
-    const ExperimentStage sequence = add(
-        "sequence",
-        {{"studio", KeySectionOf(c, "studio")},
-         {"preset", d.preset},
-         {"seconds", d.seconds},
-         {"frames", d.frames},
-         {"light", d.light}},
-        {rig.key, actor.key}, [&](const fs::path& dir) {
-          std::vector<std::string> a = {"synth", "sequence", "--rig", rig_file.string(), "--actor",
-                                        (actor.dir / "actor.json").string(), "--preset", d.preset};
-          if (d.seconds > 0) a.insert(a.end(), {"--seconds", fmt::format("{}", d.seconds)});
-          if (d.frames >= 0) a.insert(a.end(), {"--frames", std::to_string(d.frames)});
-          if (!d.light.empty()) a.insert(a.end(), {"--light", d.light});
-          AppendSets(SectionOf(c, "studio"), &a);
-          a.insert(a.end(), {"--overwrite", "-o", (dir / "dataset").string()});
-          return a;
-        });
-    std::vector<std::string> capture_depends = {model.key, sequence.key};
-    if (!tracker_key.empty()) capture_depends.push_back(tracker_key);
-    fs::path truth_maps;  // rung R1: the wrinkle map from the true detail of the wrinkle frames
-    if (d.patch_sites == "truth") {
-      CaptureOptions capture_options;
-      SetOptionsFromJson(SectionOf(c, "capture").dump(), "capture", &capture_options);
-      const int frames = capture_options.detail.wrinkle_frames;
-      const ExperimentStage& maps =
-          add("truth-maps", {{"frames", frames}}, {model.key, sequence.key}, [&](const fs::path& dir) {
-            return std::vector<std::string>{"truth-maps", "-d", (sequence.dir / "dataset").string(), "-m",
-                                            (model.dir / "model.cdm").string(), "--frames", std::to_string(frames),
-                                            "-o", (dir / "maps").string()};
-          });
-      capture_depends.push_back(maps.key);
-      truth_maps = maps.dir / "maps";
-    }
-    json capture_inputs = {{"capture", KeySectionOf(c, "capture")},
-                           {"landmarks", d.landmarks},
-                           {"noise", d.landmark_noise_px},
-                           {"mesh_every", d.mesh_every}};
-    if (d.exclusive_capture) capture_inputs["exclusive"] = true;  // its timings were taken alone
-    if (d.patch_sites != "own") capture_inputs["patch_sites"] = d.patch_sites;
-    add(
-        "capture", capture_inputs,
-        capture_depends, [&](const fs::path& dir) {
-          std::vector<std::string> a = {"capture", "-i", (sequence.dir / "dataset").string(), "--model",
-                                        (model.dir / "model.cdm").string()};
-          if (d.landmarks == "regressor") {
-            a.insert(a.end(), {"--tracker", tracker_file.string()});
-          } else if (d.landmarks == "dlib") {
-            a.insert(a.end(), {"--landmarks", "dlib"});
-          } else if (d.landmarks == "ground-truth-fit") {
-            a.push_back("--ground-truth-fit");
-          } else {
-            a.insert(a.end(), {"--ground-truth-prior", "--noise", fmt::format("{}", d.landmark_noise_px)});
-          }
-          if (d.mesh_every > 0) {
-            a.insert(a.end(), {"--mesh-every", std::to_string(d.mesh_every)});
-          } else {
-            a.push_back("--no-meshes");
-          }
-          AppendSets(SectionOf(c, "capture"), &a);
-          if (!truth_maps.empty()) a.insert(a.end(), {"--set", "wrinkle_map_from_maps=" + truth_maps.string()});
-          a.insert(a.end(), {"--overwrite", "-o", (dir / "capture").string()});
-          return a;
-        });
-    stages.back().exclusive = d.exclusive_capture;
-    const ExperimentStage capture = stages.back();
-    add("eval", {{"eval", KeySectionOf(c, "eval")}}, {capture.key, sequence.key}, [&](const fs::path& dir) {
-      std::vector<std::string> a = {"eval", "--capture", (capture.dir / "capture").string(), "--dataset",
-                                    (sequence.dir / "dataset").string(), "-o", dir.string()};
-      AppendSets(SectionOf(c, "eval"), &a);
-      return a;
-    });
+// Test actor `i` and its sequence; returns the sequence stage.
+ExperimentStage PlanSequenceStages(RunPlan& p, const ExperimentStage& rig, int i) {
+  const ExperimentConfig& c = p.c;
+  const ExperimentDataset& d = p.d;
+  const fs::path rig_file = RigFile(rig);
+  const int64_t actor_seed = d.test_seed + p.seed_offset + i;
+  const ExperimentStage actor =
+      p.Add("actor", {{"actor", KeySectionOf(c, "test_actor")}, {"seed", actor_seed}}, {rig.key}, [&](const fs::path& dir) {
+        std::vector<std::string> a = {"synth", "actor", "--rig", rig_file.string(), "--seed", std::to_string(actor_seed),
+                                      "-o", (dir / "actor.json").string()};
+        AppendSets(SectionOf(c, "test_actor"), &a);
+        return a;
+      });
+  return p.Add(
+      "sequence",
+      {{"studio", KeySectionOf(c, "studio")},
+       {"preset", d.preset},
+       {"seconds", d.seconds},
+       {"frames", d.frames},
+       {"light", d.light}},
+      {rig.key, actor.key}, [&](const fs::path& dir) {
+        std::vector<std::string> a = {"synth", "sequence", "--rig", rig_file.string(), "--actor",
+                                      (actor.dir / "actor.json").string(), "--preset", d.preset};
+        if (d.seconds > 0) a.insert(a.end(), {"--seconds", fmt::format("{}", d.seconds)});
+        if (d.frames >= 0) a.insert(a.end(), {"--frames", std::to_string(d.frames)});
+        if (!d.light.empty()) a.insert(a.end(), {"--light", d.light});
+        AppendSets(SectionOf(c, "studio"), &a);
+        a.insert(a.end(), {"--overwrite", "-o", (dir / "dataset").string()});
+        return a;
+      });
+}
+
+// Rung R1 (patch_sites: truth): the wrinkle map from the true detail of the
+// wrinkle frames; returns its key and folder.
+std::pair<std::string, fs::path> PlanTruthMapsStage(RunPlan& p, const ExperimentStage& model,
+                                                    const ExperimentStage& sequence) {
+  CaptureOptions capture_options;
+  SetOptionsFromJson(SectionOf(p.c, "capture").dump(), "capture", &capture_options);
+  const int frames = capture_options.detail.wrinkle_frames;
+  const ExperimentStage& maps =
+      p.Add("truth-maps", {{"frames", frames}}, {model.key, sequence.key}, [&](const fs::path& dir) {
+        return std::vector<std::string>{"truth-maps", "-d", (sequence.dir / "dataset").string(), "-m",
+                                        (model.dir / "model.cdm").string(), "--frames", std::to_string(frames),
+                                        "-o", (dir / "maps").string()};
+      });
+  return {maps.key, maps.dir / "maps"};
+}
+
+// The capture of a test sequence (with the tracker `tracker`: key and file, if
+// any) and its evaluation.
+void PlanCaptureStages(RunPlan& p, const ExperimentStage& model, const ExperimentStage& sequence,
+                       const std::pair<std::string, fs::path>& tracker) {
+  const ExperimentConfig& c = p.c;
+  const ExperimentDataset& d = p.d;
+  std::vector<std::string> capture_depends = {model.key, sequence.key};
+  if (!tracker.first.empty()) capture_depends.push_back(tracker.first);
+  fs::path truth_maps;  // rung R1: the wrinkle map from the true detail of the wrinkle frames
+  if (d.patch_sites == "truth") {
+    const auto [maps_key, maps_dir] = PlanTruthMapsStage(p, model, sequence);
+    capture_depends.push_back(maps_key);
+    truth_maps = maps_dir;
   }
-  return stages;
+  json capture_inputs = {{"capture", KeySectionOf(c, "capture")},
+                         {"landmarks", d.landmarks},
+                         {"noise", d.landmark_noise_px},
+                         {"mesh_every", d.mesh_every}};
+  if (d.exclusive_capture) capture_inputs["exclusive"] = true;  // its timings were taken alone
+  if (d.patch_sites != "own") capture_inputs["patch_sites"] = d.patch_sites;
+  p.Add(
+      "capture", capture_inputs,
+      capture_depends, [&](const fs::path& dir) {
+        std::vector<std::string> a = {"capture", "-i", (sequence.dir / "dataset").string(), "--model",
+                                      (model.dir / "model.cdm").string()};
+        if (d.landmarks == "regressor") {
+          a.insert(a.end(), {"--tracker", tracker.second.string()});
+        } else if (d.landmarks == "dlib") {
+          a.insert(a.end(), {"--landmarks", "dlib"});
+        } else if (d.landmarks == "ground-truth-fit") {
+          a.push_back("--ground-truth-fit");
+        } else {
+          a.insert(a.end(), {"--ground-truth-prior", "--noise", fmt::format("{}", d.landmark_noise_px)});
+        }
+        if (d.mesh_every > 0) {
+          a.insert(a.end(), {"--mesh-every", std::to_string(d.mesh_every)});
+        } else {
+          a.push_back("--no-meshes");
+        }
+        AppendSets(SectionOf(c, "capture"), &a);
+        if (!truth_maps.empty()) a.insert(a.end(), {"--set", "wrinkle_map_from_maps=" + truth_maps.string()});
+        a.insert(a.end(), {"--overwrite", "-o", (dir / "capture").string()});
+        return a;
+      });
+  p.stages.back().exclusive = d.exclusive_capture;
+  const ExperimentStage capture = p.stages.back();
+  p.Add("eval", {{"eval", KeySectionOf(c, "eval")}}, {capture.key, sequence.key}, [&](const fs::path& dir) {
+    std::vector<std::string> a = {"eval", "--capture", (capture.dir / "capture").string(), "--dataset",
+                                  (sequence.dir / "dataset").string(), "-o", dir.string()};
+    AppendSets(SectionOf(c, "eval"), &a);
+    return a;
+  });
+}
+
+}  // namespace
+
+std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::path& cache,
+                                           const std::string& program_version) {
+  RunPlan p{run.resolved, DatasetOf(run.resolved), 1000 * static_cast<int64_t>(run.seed - 1), cache, program_version,
+            {}};
+  const ExperimentStage rig = PlanRigStage(p);
+  const ExperimentStage scans = PlanScanStage(p, rig);
+  const ExperimentStage model = PlanTrainingStages(p, rig, scans);
+  if (!p.d.capture) return p.stages;
+  const std::pair<std::string, fs::path> tracker = PlanTrackerStage(p, rig);
+  for (int i = 0; i < p.d.test_actors; ++i) {
+    const ExperimentStage sequence = PlanSequenceStages(p, rig, i);
+    PlanCaptureStages(p, model, sequence, tracker);
+  }
+  return p.stages;
 }
 
 StageExecutor SubprocessExecutor(const fs::path& program) {
