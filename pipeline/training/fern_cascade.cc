@@ -506,17 +506,16 @@ Eigen::MatrixXf FernBinOutputs(const std::vector<int>& bin_of_sample, const RowM
 // Training (Eqs. 2–4)
 // ---------------------------------------------------------------------------
 
-FernTrainingResult TrainFernCascade(const Eigen::MatrixXf& patches, const Eigen::MatrixXf& targets,
-                                    const FernOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
-  options.Check();
+namespace {
+
+// Throws unless TrainFernCascade's inputs are usable: N ≥ 1 finite patches of
+// n ≤ 65536 pixels, N finite targets of D ≥ 1 coefficients, P ≤ n.
+void RequireTrainingInputs(const Eigen::MatrixXf& patches, const Eigen::MatrixXf& targets,
+                           const FernOptions& options) {
   const int N = static_cast<int>(patches.rows());
   const int n = static_cast<int>(patches.cols());
   const int D = static_cast<int>(targets.cols());
-  const int K = options.num_ferns;
-  const int F = options.fern_depth;
   const int P = options.num_sampled_pixels;
-  const int num_bins = 1 << F;
   Require(N >= 1, "TrainFernCascade: the training set is empty (0 patches)");
   Require(targets.rows() == N, fmt::format("TrainFernCascade: {} patches but {} target rows", N, targets.rows()));
   Require(D >= 1, "TrainFernCascade: targets have 0 coefficients (columns)");
@@ -524,204 +523,298 @@ FernTrainingResult TrainFernCascade(const Eigen::MatrixXf& patches, const Eigen:
   Require(P <= n, fmt::format("FernOptions.num_sampled_pixels = P = {} must be <= the patch pixel count n = {}", P, n));
   RequireFinite(patches, "patch", "pixel");
   RequireFinite(targets, "target", "coefficient");
-  const bool correlation = options.fern_pair_selection == "correlation";
-  const bool sample_threshold = options.fern_threshold_rule == "sample";
+}
 
-  FernTrainingResult result;
-  FernCascade& cascade = result.cascade;
-  FernTrainingReport& report = result.report;
-  cascade.options = options;
-  cascade.patch_pixels = n;
-  cascade.dimensions = D;
-  cascade.pixel_a.resize(static_cast<size_t>(K) * F);
-  cascade.pixel_b.resize(static_cast<size_t>(K) * F);
-  cascade.thresholds.resize(static_cast<size_t>(K) * F);
-  cascade.outputs.resize(static_cast<size_t>(K) * num_bins * D);
-  report.num_samples = N;
-  report.patch_pixels = n;
-  report.dimensions = D;
+// One run of TrainFernCascade: the training set, the current estimates c_i and
+// residuals ε_i = ĉ_i − c_i (Eq. 3), and the scratch of one fern, with one
+// method per step of a fern. The random draws of fern k come from one stream
+// (FernOptions::fern_seed forked by k), in the order of the steps.
+class FernCascadeTrainer {
+ public:
+  FernCascadeTrainer(const Eigen::MatrixXf& patches, const Eigen::MatrixXf& targets, const FernOptions& options,
+                     FernTrainingResult* result);
 
-  // c^0 = c̄ = avg(ĉ_i) (Sec. 4.3); ε^0 = ĉ − c^0.
-  const RowMatrixXf c_hat = targets;
-  const Eigen::VectorXd mean = targets.cast<double>().colwise().sum().transpose() / static_cast<double>(N);
-  cascade.mean.resize(D);
-  for (int d = 0; d < D; ++d) cascade.mean[d] = static_cast<float>(mean[d]);
-  RowMatrixXf c(N, D);
-  for (int i = 0; i < N; ++i)
-    for (int d = 0; d < D; ++d) c(i, d) = cascade.mean[d];
-  RowMatrixXf eps = c_hat - c;
+  // Trains fern k (steps 1–4) and records the training RMSE at a checkpoint.
+  void TrainFern(int k);
+  // The report's mean |correlation| and empty-bin fraction, after the last fern.
+  void FinishReport();
 
-  // Checkpoints k = 0 and every tenth of the cascade.
-  for (int j = 0; j <= 10; ++j) {
-    const int k = static_cast<int>(static_cast<int64_t>(K) * j / 10);
-    if (report.checkpoint_ferns.empty() || report.checkpoint_ferns.back() != k) report.checkpoint_ferns.push_back(k);
-  }
-  report.train_rmse.push_back(Rmse(eps));
-  size_t next_checkpoint = 1;
+ private:
+  void StartCascade(const Eigen::MatrixXf& targets);
+  void SamplePixels(Rng& rng);
+  void SampledPixelScatter();
+  void ProjectResiduals(Rng& rng);
+  void ChooseFeature(int k, int f, Rng& rng);
+  float RandomThreshold(Rng& rng) const;
+  void UpdateResiduals(int k);
 
-  const int blocks = NumSampleBlocks(N);
+  const Eigen::MatrixXf& patches_;
+  const FernOptions& options_;
+  FernCascade& cascade_;
+  FernTrainingReport& report_;
+  const int N, n, D, K, F, P, num_bins;
+  const bool correlation_;
+  const bool sample_threshold_;
+  const int blocks_;
+  const RowMatrixXf c_hat_;  // ĉ_i, the targets
+  RowMatrixXf c_;            // c_i
+  RowMatrixXf eps_;          // ε_i = ĉ_i − c_i
+  size_t next_checkpoint_ = 1;
   // The P × P pixel covariances of every fern, from one n × n scatter of all pixels
   // when n ≤ kGlobalScatterMaxPixels (cheaper than K scatters of P pixels once
   // n² < 2·K·P², e.g. n = 1024, K = 1280, P = 50), otherwise computed per fern.
-  const bool global_scatter = correlation && n <= kGlobalScatterMaxPixels;
-  const Eigen::MatrixXd all_pixel_scatter = global_scatter ? PixelScatter(patches) : Eigen::MatrixXd();
-  std::vector<int> pool(n);
-  std::vector<int> sampled(P);
-  Eigen::MatrixXf X;  // per-fern scatter only: the sampled pixels, centred
-  Eigen::MatrixXd pixel_scatter(P, P);
-  Eigen::MatrixXf directions(D, F);  // column f: the unit direction of feature f
-  Eigen::MatrixXf Y(N, F);           // column f: y_i = ε_i · v_f, centred
-  Eigen::MatrixXd target_pixel_scatter(P, F);
-  Eigen::VectorXd target_scatter(F);
-  Eigen::VectorXf feature(N);
-  std::vector<int> bins(N);
-  std::vector<Eigen::MatrixXf> block_scatter(blocks);
-  std::vector<Eigen::VectorXd> block_vector(blocks);
-  double abs_correlation_sum = 0.0;
-  int64_t empty_bins = 0;
-  Eigen::MatrixXd sums;
-  std::vector<int64_t> counts;
+  const bool global_scatter_;
+  const Eigen::MatrixXd all_pixel_scatter_;
+  std::vector<int> pool_;
+  std::vector<int> sampled_;
+  Eigen::MatrixXf X_;  // per-fern scatter only: the sampled pixels, centred
+  Eigen::MatrixXd pixel_scatter_;
+  Eigen::MatrixXf directions_;  // column f: the unit direction of feature f
+  Eigen::MatrixXf Y_;           // column f: y_i = ε_i · v_f, centred
+  Eigen::MatrixXd target_pixel_scatter_;
+  Eigen::VectorXd target_scatter_;
+  Eigen::VectorXf feature_;
+  std::vector<int> bins_;
+  std::vector<Eigen::MatrixXf> block_scatter_;
+  std::vector<Eigen::VectorXd> block_vector_;
+  double abs_correlation_sum_ = 0.0;
+  int64_t empty_bins_ = 0;
+  Eigen::MatrixXd sums_;
+  std::vector<int64_t> counts_;
+};
 
-  for (int k = 0; k < K; ++k) {
-    Rng base(options.fern_seed);
-    Rng rng = base.Fork(static_cast<uint64_t>(k));
+FernCascadeTrainer::FernCascadeTrainer(const Eigen::MatrixXf& patches, const Eigen::MatrixXf& targets,
+                                       const FernOptions& options, FernTrainingResult* result)
+    : patches_(patches),
+      options_(options),
+      cascade_(result->cascade),
+      report_(result->report),
+      N(static_cast<int>(patches.rows())),
+      n(static_cast<int>(patches.cols())),
+      D(static_cast<int>(targets.cols())),
+      K(options.num_ferns),
+      F(options.fern_depth),
+      P(options.num_sampled_pixels),
+      num_bins(1 << F),
+      correlation_(options.fern_pair_selection == "correlation"),
+      sample_threshold_(options.fern_threshold_rule == "sample"),
+      blocks_(NumSampleBlocks(N)),
+      c_hat_(targets),
+      global_scatter_(correlation_ && n <= kGlobalScatterMaxPixels),
+      all_pixel_scatter_(global_scatter_ ? PixelScatter(patches) : Eigen::MatrixXd()),
+      pool_(n),
+      sampled_(P),
+      pixel_scatter_(P, P),
+      directions_(D, F),
+      Y_(N, F),
+      target_pixel_scatter_(P, F),
+      target_scatter_(F),
+      feature_(N),
+      bins_(N),
+      block_scatter_(blocks_),
+      block_vector_(blocks_) {
+  StartCascade(targets);
+}
 
-    // 1. P pixel positions, uniformly without replacement (partial Fisher–Yates).
-    std::iota(pool.begin(), pool.end(), 0);
-    for (int m = 0; m < P; ++m) {
-      const int j = m + static_cast<int>(rng.UniformInt(static_cast<uint64_t>(n - m)));
-      std::swap(pool[m], pool[j]);
-      sampled[m] = pool[m];
+// The cascade's arrays, c^0 = c̄ = avg(ĉ_i) (Sec. 4.3), ε^0 = ĉ − c^0, and the
+// checkpoints k = 0 and every tenth of the cascade.
+void FernCascadeTrainer::StartCascade(const Eigen::MatrixXf& targets) {
+  cascade_.options = options_;
+  cascade_.patch_pixels = n;
+  cascade_.dimensions = D;
+  cascade_.pixel_a.resize(static_cast<size_t>(K) * F);
+  cascade_.pixel_b.resize(static_cast<size_t>(K) * F);
+  cascade_.thresholds.resize(static_cast<size_t>(K) * F);
+  cascade_.outputs.resize(static_cast<size_t>(K) * num_bins * D);
+  report_.num_samples = N;
+  report_.patch_pixels = n;
+  report_.dimensions = D;
+
+  const Eigen::VectorXd mean = targets.cast<double>().colwise().sum().transpose() / static_cast<double>(N);
+  cascade_.mean.resize(D);
+  for (int d = 0; d < D; ++d) cascade_.mean[d] = static_cast<float>(mean[d]);
+  c_.resize(N, D);
+  for (int i = 0; i < N; ++i)
+    for (int d = 0; d < D; ++d) c_(i, d) = cascade_.mean[d];
+  eps_ = c_hat_ - c_;
+
+  for (int j = 0; j <= 10; ++j) {
+    const int k = static_cast<int>(static_cast<int64_t>(K) * j / 10);
+    if (report_.checkpoint_ferns.empty() || report_.checkpoint_ferns.back() != k) report_.checkpoint_ferns.push_back(k);
+  }
+  report_.train_rmse.push_back(Rmse(eps_));
+}
+
+void FernCascadeTrainer::TrainFern(int k) {
+  Rng base(options_.fern_seed);
+  Rng rng = base.Fork(static_cast<uint64_t>(k));
+  SamplePixels(rng);
+  if (correlation_) {
+    SampledPixelScatter();
+    ProjectResiduals(rng);
+  }
+  std::fill(bins_.begin(), bins_.end(), 0);
+  for (int f = 0; f < F; ++f) ChooseFeature(k, f, rng);
+  UpdateResiduals(k);
+  if (next_checkpoint_ < report_.checkpoint_ferns.size() && report_.checkpoint_ferns[next_checkpoint_] == k + 1) {
+    report_.train_rmse.push_back(Rmse(eps_));
+    ++next_checkpoint_;
+  }
+}
+
+// 1. P pixel positions, uniformly without replacement (partial Fisher–Yates).
+void FernCascadeTrainer::SamplePixels(Rng& rng) {
+  std::iota(pool_.begin(), pool_.end(), 0);
+  for (int m = 0; m < P; ++m) {
+    const int j = m + static_cast<int>(rng.UniformInt(static_cast<uint64_t>(n - m)));
+    std::swap(pool_[m], pool_[j]);
+    sampled_[m] = pool_[m];
+  }
+}
+
+// P × P pixel covariance (as a scatter) of the sampled pixels, once per fern.
+void FernCascadeTrainer::SampledPixelScatter() {
+  if (global_scatter_) {
+    for (int m = 0; m < P; ++m)
+      for (int q = 0; q < P; ++q) pixel_scatter_(m, q) = all_pixel_scatter_(sampled_[m], sampled_[q]);
+    return;
+  }
+  X_.resize(N, P);
+  tbb::parallel_for(0, P, [&](int m) {
+    const float* src = patches_.col(sampled_[m]).data();
+    double sum = 0.0;
+    for (int i = 0; i < N; ++i) sum += src[i];
+    const float mu = static_cast<float>(sum / N);
+    float* dst = X_.col(m).data();
+    for (int i = 0; i < N; ++i) dst[i] = src[i] - mu;
+  });
+  ForSampleBlocks(N, [&](int block, int i0, int i1) {
+    const auto Xb = X_.middleRows(i0, i1 - i0);
+    block_scatter_[block].noalias() = Xb.transpose() * Xb;
+  });
+  pixel_scatter_.setZero();
+  for (int block = 0; block < blocks_; ++block) pixel_scatter_ += block_scatter_[block].cast<double>();
+}
+
+// 2. F random unit directions v_f (uniform on the sphere) and the projected
+// residuals y_f = ε · v_f, all before the features: ε does not change within a
+// fern. Then their scatters and their covariances with the sampled pixels.
+void FernCascadeTrainer::ProjectResiduals(Rng& rng) {
+  for (int f = 0; f < F; ++f) {
+    double norm = 0.0;
+    Eigen::VectorXd v(D);
+    while (!(norm > 0.0)) {
+      for (int d = 0; d < D; ++d) v[d] = rng.Normal();
+      norm = v.norm();
     }
+    directions_.col(f) = (v / norm).cast<float>();
+  }
+  ForSampleBlocks(N, [&](int block, int i0, int i1) {
+    Y_.middleRows(i0, i1 - i0).noalias() = eps_.middleRows(i0, i1 - i0) * directions_;
+    block_vector_[block] = Y_.middleRows(i0, i1 - i0).cast<double>().colwise().sum().transpose();
+  });
+  Eigen::VectorXd y_sum = Eigen::VectorXd::Zero(F);
+  for (int block = 0; block < blocks_; ++block) y_sum += block_vector_[block];
+  const Eigen::RowVectorXf y_mean = (y_sum / N).cast<float>().transpose();
+  ForSampleBlocks(N, [&](int block, int i0, int i1) {
+    Y_.middleRows(i0, i1 - i0).rowwise() -= y_mean;
+    block_vector_[block] = Y_.middleRows(i0, i1 - i0).cast<double>().colwise().squaredNorm().transpose();
+  });
+  target_scatter_.setZero();
+  for (int block = 0; block < blocks_; ++block) target_scatter_ += block_vector_[block];
+  // Σ_i y_if (p_im − p̄_m) = Σ_i y_if p_im since Σ_i y_if = 0: one pass over the
+  // P raw pixel columns for all F directions, parallel over pixels.
+  tbb::parallel_for(0, P, [&](int m) {
+    double dots[16];  // F ≤ 16
+    BlockedDots(patches_.col(sampled_[m]).data(), Y_, dots);
+    for (int f = 0; f < F; ++f) target_pixel_scatter_(m, f) = dots[f];
+  });
+}
 
-    if (correlation) {
-      // P × P pixel covariance (as a scatter), once per fern.
-      if (global_scatter) {
-        for (int m = 0; m < P; ++m)
-          for (int q = 0; q < P; ++q) pixel_scatter(m, q) = all_pixel_scatter(sampled[m], sampled[q]);
-      } else {
-        X.resize(N, P);
-        tbb::parallel_for(0, P, [&](int m) {
-          const float* src = patches.col(sampled[m]).data();
-          double sum = 0.0;
-          for (int i = 0; i < N; ++i) sum += src[i];
-          const float mu = static_cast<float>(sum / N);
-          float* dst = X.col(m).data();
-          for (int i = 0; i < N; ++i) dst[i] = src[i] - mu;
-        });
-        ForSampleBlocks(N, [&](int block, int i0, int i1) {
-          const auto Xb = X.middleRows(i0, i1 - i0);
-          block_scatter[block].noalias() = Xb.transpose() * Xb;
-        });
-        pixel_scatter.setZero();
-        for (int block = 0; block < blocks; ++block) pixel_scatter += block_scatter[block].cast<double>();
-      }
-
-      // 2. F random unit directions v_f (uniform on the sphere) and the projected
-      // residuals y_f = ε · v_f, all before the features: ε does not change within a fern.
-      for (int f = 0; f < F; ++f) {
-        double norm = 0.0;
-        Eigen::VectorXd v(D);
-        while (!(norm > 0.0)) {
-          for (int d = 0; d < D; ++d) v[d] = rng.Normal();
-          norm = v.norm();
-        }
-        directions.col(f) = (v / norm).cast<float>();
-      }
-      ForSampleBlocks(N, [&](int block, int i0, int i1) {
-        Y.middleRows(i0, i1 - i0).noalias() = eps.middleRows(i0, i1 - i0) * directions;
-        block_vector[block] = Y.middleRows(i0, i1 - i0).cast<double>().colwise().sum().transpose();
-      });
-      Eigen::VectorXd y_sum = Eigen::VectorXd::Zero(F);
-      for (int block = 0; block < blocks; ++block) y_sum += block_vector[block];
-      const Eigen::RowVectorXf y_mean = (y_sum / N).cast<float>().transpose();
-      ForSampleBlocks(N, [&](int block, int i0, int i1) {
-        Y.middleRows(i0, i1 - i0).rowwise() -= y_mean;
-        block_vector[block] = Y.middleRows(i0, i1 - i0).cast<double>().colwise().squaredNorm().transpose();
-      });
-      target_scatter.setZero();
-      for (int block = 0; block < blocks; ++block) target_scatter += block_vector[block];
-      // Σ_i y_if (p_im − p̄_m) = Σ_i y_if p_im since Σ_i y_if = 0: one pass over the
-      // P raw pixel columns for all F directions, parallel over pixels.
-      tbb::parallel_for(0, P, [&](int m) {
-        double dots[16];  // F ≤ 16
-        BlockedDots(patches.col(sampled[m]).data(), Y, dots);
-        for (int f = 0; f < F; ++f) target_pixel_scatter(m, f) = dots[f];
-      });
-    }
-
-    std::fill(bins.begin(), bins.end(), 0);
-    for (int f = 0; f < F; ++f) {
-      int a = 0, b = 0;
-      if (correlation) {
-        // Cao et al. 2012 selection for direction f.
-        const PixelPair pair = SelectCorrelatedPair(pixel_scatter, target_pixel_scatter.col(f), target_scatter[f]);
-        abs_correlation_sum += std::abs(pair.correlation);
-        a = sampled[pair.m];
-        b = sampled[pair.n];
-      } else {
-        const int m = static_cast<int>(rng.UniformInt(static_cast<uint64_t>(P)));
-        int m2 = static_cast<int>(rng.UniformInt(static_cast<uint64_t>(P - 1)));
-        if (m2 >= m) ++m2;
-        a = sampled[m];
-        b = sampled[m2];
-      }
-
-      // Feature values t_i[a] − t_i[b], in float exactly as at evaluation.
-      const float* pa = patches.col(a).data();
-      const float* pb = patches.col(b).data();
-      tbb::parallel_for(0, blocks, [&](int block) {
-        const int i0 = block * kSampleBlock, i1 = std::min(N, i0 + kSampleBlock);
-        for (int i = i0; i < i1; ++i) feature[i] = pa[i] - pb[i];
-      });
-      // 3. Random threshold (Differences from the paper, item 1).
-      float theta;
-      if (sample_threshold) {
-        theta = feature[static_cast<int>(rng.UniformInt(static_cast<uint64_t>(N)))];
-      } else {
-        const float lo = feature.minCoeff();
-        const float hi = feature.maxCoeff();
-        const double u = rng.Uniform() - 0.5;
-        theta = static_cast<float>(0.5 * (static_cast<double>(lo) + hi) +
-                                   u * options.fern_threshold_range * (static_cast<double>(hi) - lo));
-      }
-      const size_t idx = static_cast<size_t>(k) * F + f;
-      cascade.pixel_a[idx] = static_cast<uint16_t>(a);
-      cascade.pixel_b[idx] = static_cast<uint16_t>(b);
-      cascade.thresholds[idx] = theta;
-      tbb::parallel_for(0, blocks, [&](int block) {
-        const int i0 = block * kSampleBlock, i1 = std::min(N, i0 + kSampleBlock);
-        for (int i = i0; i < i1; ++i) bins[i] |= static_cast<int>(feature[i] > theta) << f;
-      });
-    }
-
-    // 4. Eq. 4 bin outputs, then c_i ← c_i + δc_b and ε_i = ĉ_i − c_i (Eq. 3).
-    BinSums(bins, eps, num_bins, &sums, &counts);
-    const Eigen::MatrixXf delta = ShrunkOutputs(sums, counts, options.shrinkage);
-    for (int bin = 0; bin < num_bins; ++bin) {
-      empty_bins += counts[bin] == 0;
-      float* dst = cascade.outputs.data() + (static_cast<size_t>(k) * num_bins + bin) * D;
-      for (int d = 0; d < D; ++d) dst[d] = delta(bin, d);
-    }
-    ForSampleBlocks(N, [&](int, int i0, int i1) {
-      for (int i = i0; i < i1; ++i) {
-        const float* o = cascade.BinOutput(k, bins[i]);
-        for (int d = 0; d < D; ++d) {
-          c(i, d) += o[d];
-          eps(i, d) = c_hat(i, d) - c(i, d);
-        }
-      }
-    });
-
-    if (next_checkpoint < report.checkpoint_ferns.size() && report.checkpoint_ferns[next_checkpoint] == k + 1) {
-      report.train_rmse.push_back(Rmse(eps));
-      ++next_checkpoint;
-    }
+// Feature f of fern k: a pixel pair (Cao et al. 2012 selection for direction f,
+// or a random pair), its values t_i[a] − t_i[b], a threshold, and bit f of every
+// sample's bin.
+void FernCascadeTrainer::ChooseFeature(int k, int f, Rng& rng) {
+  int a = 0, b = 0;
+  if (correlation_) {
+    const PixelPair pair = SelectCorrelatedPair(pixel_scatter_, target_pixel_scatter_.col(f), target_scatter_[f]);
+    abs_correlation_sum_ += std::abs(pair.correlation);
+    a = sampled_[pair.m];
+    b = sampled_[pair.n];
+  } else {
+    const int m = static_cast<int>(rng.UniformInt(static_cast<uint64_t>(P)));
+    int m2 = static_cast<int>(rng.UniformInt(static_cast<uint64_t>(P - 1)));
+    if (m2 >= m) ++m2;
+    a = sampled_[m];
+    b = sampled_[m2];
   }
 
-  report.mean_abs_correlation = correlation ? abs_correlation_sum / (static_cast<double>(K) * F) : 0.0;
-  report.empty_bin_fraction = static_cast<double>(empty_bins) / (static_cast<double>(K) * num_bins);
-  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  // Feature values t_i[a] − t_i[b], in float exactly as at evaluation.
+  const float* pa = patches_.col(a).data();
+  const float* pb = patches_.col(b).data();
+  tbb::parallel_for(0, blocks_, [&](int block) {
+    const int i0 = block * kSampleBlock, i1 = std::min(N, i0 + kSampleBlock);
+    for (int i = i0; i < i1; ++i) feature_[i] = pa[i] - pb[i];
+  });
+  const float theta = RandomThreshold(rng);
+  const size_t idx = static_cast<size_t>(k) * F + f;
+  cascade_.pixel_a[idx] = static_cast<uint16_t>(a);
+  cascade_.pixel_b[idx] = static_cast<uint16_t>(b);
+  cascade_.thresholds[idx] = theta;
+  tbb::parallel_for(0, blocks_, [&](int block) {
+    const int i0 = block * kSampleBlock, i1 = std::min(N, i0 + kSampleBlock);
+    for (int i = i0; i < i1; ++i) bins_[i] |= static_cast<int>(feature_[i] > theta) << f;
+  });
+}
+
+// 3. Random threshold of the current feature values (Differences from the
+// paper, item 1): one sample's value, or uniform in the middle of their range.
+float FernCascadeTrainer::RandomThreshold(Rng& rng) const {
+  if (sample_threshold_) return feature_[static_cast<int>(rng.UniformInt(static_cast<uint64_t>(N)))];
+  const float lo = feature_.minCoeff();
+  const float hi = feature_.maxCoeff();
+  const double u = rng.Uniform() - 0.5;
+  return static_cast<float>(0.5 * (static_cast<double>(lo) + hi) +
+                            u * options_.fern_threshold_range * (static_cast<double>(hi) - lo));
+}
+
+// 4. Eq. 4 bin outputs, then c_i ← c_i + δc_b and ε_i = ĉ_i − c_i (Eq. 3).
+void FernCascadeTrainer::UpdateResiduals(int k) {
+  BinSums(bins_, eps_, num_bins, &sums_, &counts_);
+  const Eigen::MatrixXf delta = ShrunkOutputs(sums_, counts_, options_.shrinkage);
+  for (int bin = 0; bin < num_bins; ++bin) {
+    empty_bins_ += counts_[bin] == 0;
+    float* dst = cascade_.outputs.data() + (static_cast<size_t>(k) * num_bins + bin) * D;
+    for (int d = 0; d < D; ++d) dst[d] = delta(bin, d);
+  }
+  ForSampleBlocks(N, [&](int, int i0, int i1) {
+    for (int i = i0; i < i1; ++i) {
+      const float* o = cascade_.BinOutput(k, bins_[i]);
+      for (int d = 0; d < D; ++d) {
+        c_(i, d) += o[d];
+        eps_(i, d) = c_hat_(i, d) - c_(i, d);
+      }
+    }
+  });
+}
+
+void FernCascadeTrainer::FinishReport() {
+  report_.mean_abs_correlation = correlation_ ? abs_correlation_sum_ / (static_cast<double>(K) * F) : 0.0;
+  report_.empty_bin_fraction = static_cast<double>(empty_bins_) / (static_cast<double>(K) * num_bins);
+}
+
+}  // namespace
+
+FernTrainingResult TrainFernCascade(const Eigen::MatrixXf& patches, const Eigen::MatrixXf& targets,
+                                    const FernOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  options.Check();
+  RequireTrainingInputs(patches, targets, options);
+  FernTrainingResult result;
+  FernCascadeTrainer trainer(patches, targets, options, &result);
+  for (int k = 0; k < options.num_ferns; ++k) trainer.TrainFern(k);
+  trainer.FinishReport();
+  result.report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }
 
