@@ -361,11 +361,10 @@ MatX2d MeanShapeOf(const std::vector<MatX2d>& shapes, int left_eye, int right_ey
 // ---------------------------------------------------------------------------
 // Training (ESR Alg. 1)
 
-ShapeRegressorTrainingResult TrainShapeRegressor(const std::vector<cv::Mat>& images,
-                                                 const std::vector<MatX2d>& shapes,
-                                                 const ShapeRegressorOptions& options) {
-  const auto start = std::chrono::steady_clock::now();
-  options.Check();
+namespace {
+
+// Throws unless the training set is usable; returns the landmark count L.
+int RequireTrainingSet(const std::vector<cv::Mat>& images, const std::vector<MatX2d>& shapes) {
   Require(!images.empty(), "TrainShapeRegressor: no training images");
   Require(images.size() == shapes.size(), fmt::format("TrainShapeRegressor: {} images but {} shapes", images.size(),
                                                       shapes.size()));
@@ -377,175 +376,252 @@ ShapeRegressorTrainingResult TrainShapeRegressor(const std::vector<cv::Mat>& ima
             fmt::format("TrainShapeRegressor: shape {} must be {}×2 finite pixels (has {} rows)", i, L,
                         shapes[i].rows()));
   }
-  int left_eye, right_eye;
-  EyePair(L, &left_eye, &right_eye);
+  return L;
+}
 
-  const int n_img = static_cast<int>(images.size());
-  const int A = options.augmentation;
-  const int N = n_img * A;
-  const int T = options.num_stages, K = options.num_ferns, F = options.fern_depth, P = options.num_sampled_pixels;
-  const int B = 1 << F, D = 2 * L;
+// One run of TrainShapeRegressor: the training samples (A augmented initial
+// shapes per image), their current shapes, and one method per step of ESR Alg. 1.
+class ShapeRegressorTrainer {
+ public:
+  ShapeRegressorTrainer(const std::vector<cv::Mat>& images, const std::vector<MatX2d>& shapes,
+                        const ShapeRegressorOptions& options, int num_landmarks, ShapeRegressorTrainingResult* result);
 
-  ShapeRegressorTrainingResult result;
-  ShapeRegressor& r = result.regressor;
-  r.options = options;
-  r.num_landmarks = L;
-  r.mean_shape = MeanShapeOf(shapes, left_eye, right_eye);
-  r.pixel_landmark.resize(static_cast<size_t>(T) * P);
-  r.pixel_offset.resize(static_cast<size_t>(T) * P * 2);
-  r.fern_pixel_a.resize(static_cast<size_t>(T) * K * F);
-  r.fern_pixel_b.resize(r.fern_pixel_a.size());
-  r.fern_threshold.resize(r.fern_pixel_a.size());
-  r.fern_output.resize(static_cast<size_t>(T) * K * B * D);
+  // Initial shapes (augmentation), from the stream `arng`.
+  void InitialShapes(Rng arng);
+  // Appends the mean error of the current shapes (over the inter-ocular distance).
+  void ReportError();
+  // Stage t: its pixels, targets and K ferns, then the shapes' update.
+  void TrainStage(int t, Rng& srng);
+  // The report's sample counts and mean |correlation|.
+  void FinishReport();
 
-  Rng rng(options.seed);
-  // Initial shapes (augmentation).
-  std::vector<MatX2d> current(N);
-  std::vector<int> image_of(N);
-  {
-    Rng arng = rng.Fork(0);
-    const int n_track = static_cast<int>(std::lround(options.tracking_fraction * A));
-    for (int i = 0; i < n_img; ++i) {
-      const MatX2d& truth = shapes[i];
-      const Cd g = Centroid(truth);
-      const double iod = std::max(1e-9, (truth.row(left_eye) - truth.row(right_eye)).norm());
-      const Eigen::Vector2d lo = truth.colwise().minCoeff(), hi = truth.colwise().maxCoeff();
-      const double side = std::max(hi.x() - lo.x(), hi.y() - lo.y());
-      const Cd box_centre(0.5 * (lo.x() + hi.x()), 0.5 * (lo.y() + hi.y()));
-      for (int a = 0; a < A; ++a) {
-        const int j = i * A + a;
-        image_of[j] = i;
-        MatX2d s(L, 2);
-        if (a < n_track) {
-          // Tracking-like: the truth under a random similarity about its centroid.
-          const Cd shift(arng.Normal(0, options.perturb_translation * iod),
-                         arng.Normal(0, options.perturb_translation * iod));
-          const double angle = arng.Normal(0, options.perturb_rotation_deg) * std::numbers::pi / 180.0;
-          const double scale = std::exp(arng.Normal(0, options.perturb_scale));
-          const Cd c = std::polar(scale, angle);
-          for (int l = 0; l < L; ++l) {
-            const Cd p = g + shift + c * (Point(truth, l) - g);
-            s.row(l) << p.real(), p.imag();
-          }
-        } else {
-          // Detection-like: another sample's truth in this sample's jittered square box.
-          int other = i;
-          if (n_img > 1) {
-            other = static_cast<int>(arng.UniformInt(static_cast<uint64_t>(n_img - 1)));
-            if (other >= i) ++other;
-          }
-          const Cd jitter(arng.Normal(0, options.box_jitter_translation * side),
-                          arng.Normal(0, options.box_jitter_translation * side));
-          const double k = std::exp(arng.Normal(0, options.box_jitter_scale));
-          s = PlaceInSquareBox(shapes[other], box_centre + jitter, side * k);
-        }
-        current[j] = s;
-      }
-    }
-  }
-  auto report_error = [&] {
-    double sum = 0;
-    for (int j = 0; j < N; ++j) sum += MeanErrorOverIod(current[j], shapes[image_of[j]]);
-    result.report.train_error_iod.push_back(sum / N);
-  };
-  report_error();
+ private:
+  void SampleStagePixels(int t, Rng& srng);
+  void StageSamples(int t);
+  void TrainFern(size_t fern, const Eigen::MatrixXd& Xc, const Eigen::MatrixXd& pixel_scatter, Rng& srng);
 
-  std::vector<GreySampler> samplers;
-  samplers.reserve(n_img);
-  for (const cv::Mat& im : images) samplers.emplace_back(im);
+  const std::vector<MatX2d>& shapes_;
+  const ShapeRegressorOptions& options_;
+  ShapeRegressorTrainingResult& result_;
+  ShapeRegressor& r_;
+  int left_eye_ = 0, right_eye_ = 0;
+  const int n_img, A, N, T, K, F, P, B, L, D;
+  std::vector<MatX2d> current_;
+  std::vector<int> image_of_;
+  std::vector<GreySampler> samplers_;
+  RowMatrixXf Y_;  // residuals in the normalised frame
+  RowMatrixXf U_;  // the stage's accumulated update
+  Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> X_;  // pixel values
+  std::vector<Similarity> sims_;
+  std::vector<int> bins_;
+  double corr_sum_ = 0;
+  int64_t corr_count_ = 0;
+};
 
-  RowMatrixXf Y(N, D);                        // residuals in the normalised frame
-  RowMatrixXf U(N, D);                        // the stage's accumulated update
-  Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> X(N, P);  // pixel values
-  std::vector<Similarity> sims(N);
-  std::vector<int> bins(N);
-  double corr_sum = 0;
-  int64_t corr_count = 0;
+ShapeRegressorTrainer::ShapeRegressorTrainer(const std::vector<cv::Mat>& images, const std::vector<MatX2d>& shapes,
+                                             const ShapeRegressorOptions& options, int num_landmarks,
+                                             ShapeRegressorTrainingResult* result)
+    : shapes_(shapes),
+      options_(options),
+      result_(*result),
+      r_(result->regressor),
+      n_img(static_cast<int>(images.size())),
+      A(options.augmentation),
+      N(n_img * A),
+      T(options.num_stages),
+      K(options.num_ferns),
+      F(options.fern_depth),
+      P(options.num_sampled_pixels),
+      B(1 << F),
+      L(num_landmarks),
+      D(2 * L) {
+  EyePair(L, &left_eye_, &right_eye_);
+  r_.options = options;
+  r_.num_landmarks = L;
+  r_.mean_shape = MeanShapeOf(shapes, left_eye_, right_eye_);
+  r_.pixel_landmark.resize(static_cast<size_t>(T) * P);
+  r_.pixel_offset.resize(static_cast<size_t>(T) * P * 2);
+  r_.fern_pixel_a.resize(static_cast<size_t>(T) * K * F);
+  r_.fern_pixel_b.resize(r_.fern_pixel_a.size());
+  r_.fern_threshold.resize(r_.fern_pixel_a.size());
+  r_.fern_output.resize(static_cast<size_t>(T) * K * B * D);
+  current_.resize(N);
+  image_of_.resize(N);
+  samplers_.reserve(n_img);
+  for (const cv::Mat& im : images) samplers_.emplace_back(im);
+  Y_.resize(N, D);
+  U_.resize(N, D);
+  X_.resize(N, P);
+  sims_.resize(N);
+  bins_.resize(N);
+}
 
-  for (int t = 0; t < T; ++t) {
-    Rng srng = rng.Fork(1 + static_cast<uint64_t>(t));
-    // Shape-indexed pixels of this stage: around a random landmark of the mean shape,
-    // indexed by the nearest one (Differences 2).
-    const double radius = T == 1 ? options.feature_radius_first
-                                 : options.feature_radius_first +
-                                       (options.feature_radius_last - options.feature_radius_first) * t / (T - 1);
-    for (int p = 0; p < P; ++p) {
-      const int l0 = static_cast<int>(srng.UniformInt(static_cast<uint64_t>(L)));
-      const double rad = radius * std::sqrt(srng.Uniform()), ang = 2 * std::numbers::pi * srng.Uniform();
-      const Cd pos = Point(r.mean_shape, l0) + std::polar(rad, ang);
-      int best = 0;
-      double best_d = 1e300;
-      for (int l = 0; l < L; ++l) {
-        const double d = std::norm(pos - Point(r.mean_shape, l));
-        if (d < best_d) best_d = d, best = l;
-      }
-      const Cd off = pos - Point(r.mean_shape, best);
-      r.pixel_landmark[static_cast<size_t>(t) * P + p] = static_cast<uint16_t>(best);
-      r.pixel_offset[(static_cast<size_t>(t) * P + p) * 2] = static_cast<float>(off.real());
-      r.pixel_offset[(static_cast<size_t>(t) * P + p) * 2 + 1] = static_cast<float>(off.imag());
-    }
-    // Per sample: similarity, residual target Y = M_S(Ŝ − S), pixels.
-    tbb::parallel_for(tbb::blocked_range<int>(0, N, 64), [&](const tbb::blocked_range<int>& range) {
-      for (int j = range.begin(); j < range.end(); ++j) {
-        sims[j] = SimilarityFromMean(current[j], r.mean_shape);
-        const MatX2d& truth = shapes[image_of[j]];
+// A initial shapes per image: the first tracking_fraction·A tracking-like (the
+// truth under a random similarity), the rest detection-like (another image's
+// truth in this image's jittered box).
+void ShapeRegressorTrainer::InitialShapes(Rng arng) {
+  const int n_track = static_cast<int>(std::lround(options_.tracking_fraction * A));
+  for (int i = 0; i < n_img; ++i) {
+    const MatX2d& truth = shapes_[i];
+    const Cd g = Centroid(truth);
+    const double iod = std::max(1e-9, (truth.row(left_eye_) - truth.row(right_eye_)).norm());
+    const Eigen::Vector2d lo = truth.colwise().minCoeff(), hi = truth.colwise().maxCoeff();
+    const double side = std::max(hi.x() - lo.x(), hi.y() - lo.y());
+    const Cd box_centre(0.5 * (lo.x() + hi.x()), 0.5 * (lo.y() + hi.y()));
+    for (int a = 0; a < A; ++a) {
+      const int j = i * A + a;
+      image_of_[j] = i;
+      MatX2d s(L, 2);
+      if (a < n_track) {
+        // Tracking-like: the truth under a random similarity about its centroid.
+        const Cd shift(arng.Normal(0, options_.perturb_translation * iod),
+                       arng.Normal(0, options_.perturb_translation * iod));
+        const double angle = arng.Normal(0, options_.perturb_rotation_deg) * std::numbers::pi / 180.0;
+        const double scale = std::exp(arng.Normal(0, options_.perturb_scale));
+        const Cd c = std::polar(scale, angle);
         for (int l = 0; l < L; ++l) {
-          const Cd y = (Point(truth, l) - Point(current[j], l)) / sims[j].c;
-          Y(j, 2 * l) = static_cast<float>(y.real());
-          Y(j, 2 * l + 1) = static_cast<float>(y.imag());
+          const Cd p = g + shift + c * (Point(truth, l) - g);
+          s.row(l) << p.real(), p.imag();
         }
-        SamplePixels(r, t, samplers[image_of[j]], current[j], sims[j], X.row(j).data());
-      }
-    });
-    U.setZero();
-    // P×P pixel scatter, once per stage (ESR Sec. 2.4: cov(x_m − x_n) from cov(x_m, x_n)).
-    const Eigen::MatrixXd Xc = X.cast<double>().rowwise() - X.cast<double>().colwise().mean();
-    const Eigen::MatrixXd pixel_scatter = Xc.transpose() * Xc;
-
-    for (int k = 0; k < K; ++k) {
-      const size_t fern = static_cast<size_t>(t) * K + k;
-      // F random unit directions in target space, drawn together (the residuals do
-      // not change within a fern).
-      Eigen::MatrixXd V(D, F);
-      for (int f = 0; f < F; ++f) {
-        for (int d = 0; d < D; ++d) V(d, f) = srng.Normal();
-        V.col(f).normalize();
-      }
-      Eigen::MatrixXd Yv = Y.cast<double>() * V;        // N×F projected targets
-      Yv.rowwise() -= Yv.colwise().mean();
-      const Eigen::MatrixXd target_pixel = Xc.transpose() * Yv;  // P×F
-      for (int f = 0; f < F; ++f) {
-        const PixelPair pair = SelectCorrelatedPair(pixel_scatter, target_pixel.col(f), Yv.col(f).squaredNorm());
-        corr_sum += std::abs(pair.correlation);
-        ++corr_count;
-        const int sample = static_cast<int>(srng.UniformInt(static_cast<uint64_t>(N)));
-        r.fern_pixel_a[fern * F + f] = static_cast<uint16_t>(pair.m);
-        r.fern_pixel_b[fern * F + f] = static_cast<uint16_t>(pair.n);
-        r.fern_threshold[fern * F + f] = X(sample, pair.m) - X(sample, pair.n);
-      }
-      for (int j = 0; j < N; ++j) bins[j] = FernBin(r, fern, X.row(j).data());
-      // ESR Eq. 7 / paper Eq. 4: shrunk mean residual per bin.
-      const Eigen::MatrixXf out = FernBinOutputs(bins, Y, B, options.shrinkage);
-      float* dst = r.fern_output.data() + fern * B * D;
-      for (int b = 0; b < B; ++b) {
-        for (int d = 0; d < D; ++d) dst[static_cast<size_t>(b) * D + d] = out(b, d);
-      }
-      tbb::parallel_for(tbb::blocked_range<int>(0, N, 256), [&](const tbb::blocked_range<int>& range) {
-        for (int j = range.begin(); j < range.end(); ++j) {
-          const float* o = dst + static_cast<size_t>(bins[j]) * D;
-          for (int d = 0; d < D; ++d) {
-            U(j, d) += o[d];
-            Y(j, d) -= o[d];
-          }
+      } else {
+        // Detection-like: another sample's truth in this sample's jittered square box.
+        int other = i;
+        if (n_img > 1) {
+          other = static_cast<int>(arng.UniformInt(static_cast<uint64_t>(n_img - 1)));
+          if (other >= i) ++other;
         }
-      });
+        const Cd jitter(arng.Normal(0, options_.box_jitter_translation * side),
+                        arng.Normal(0, options_.box_jitter_translation * side));
+        const double k = std::exp(arng.Normal(0, options_.box_jitter_scale));
+        s = PlaceInSquareBox(shapes_[other], box_centre + jitter, side * k);
+      }
+      current_[j] = s;
     }
-    for (int j = 0; j < N; ++j) ApplyUpdate(sims[j], U.row(j).data(), &current[j]);
-    report_error();
   }
-  result.report.num_images = n_img;
-  result.report.num_samples = N;
-  result.report.mean_abs_correlation = corr_count ? corr_sum / corr_count : 0.0;
+}
+
+void ShapeRegressorTrainer::ReportError() {
+  double sum = 0;
+  for (int j = 0; j < N; ++j) sum += MeanErrorOverIod(current_[j], shapes_[image_of_[j]]);
+  result_.report.train_error_iod.push_back(sum / N);
+}
+
+void ShapeRegressorTrainer::TrainStage(int t, Rng& srng) {
+  SampleStagePixels(t, srng);
+  StageSamples(t);
+  U_.setZero();
+  // P×P pixel scatter, once per stage (ESR Sec. 2.4: cov(x_m − x_n) from cov(x_m, x_n)).
+  const Eigen::MatrixXd Xc = X_.cast<double>().rowwise() - X_.cast<double>().colwise().mean();
+  const Eigen::MatrixXd pixel_scatter = Xc.transpose() * Xc;
+  for (int k = 0; k < K; ++k) TrainFern(static_cast<size_t>(t) * K + k, Xc, pixel_scatter, srng);
+  for (int j = 0; j < N; ++j) ApplyUpdate(sims_[j], U_.row(j).data(), &current_[j]);
+}
+
+// Shape-indexed pixels of stage t: around a random landmark of the mean shape,
+// indexed by the nearest one (Differences 2).
+void ShapeRegressorTrainer::SampleStagePixels(int t, Rng& srng) {
+  const double radius = T == 1 ? options_.feature_radius_first
+                               : options_.feature_radius_first +
+                                     (options_.feature_radius_last - options_.feature_radius_first) * t / (T - 1);
+  for (int p = 0; p < P; ++p) {
+    const int l0 = static_cast<int>(srng.UniformInt(static_cast<uint64_t>(L)));
+    const double rad = radius * std::sqrt(srng.Uniform()), ang = 2 * std::numbers::pi * srng.Uniform();
+    const Cd pos = Point(r_.mean_shape, l0) + std::polar(rad, ang);
+    int best = 0;
+    double best_d = 1e300;
+    for (int l = 0; l < L; ++l) {
+      const double d = std::norm(pos - Point(r_.mean_shape, l));
+      if (d < best_d) best_d = d, best = l;
+    }
+    const Cd off = pos - Point(r_.mean_shape, best);
+    r_.pixel_landmark[static_cast<size_t>(t) * P + p] = static_cast<uint16_t>(best);
+    r_.pixel_offset[(static_cast<size_t>(t) * P + p) * 2] = static_cast<float>(off.real());
+    r_.pixel_offset[(static_cast<size_t>(t) * P + p) * 2 + 1] = static_cast<float>(off.imag());
+  }
+}
+
+// Per sample: similarity, residual target Y = M_S(Ŝ − S), pixels.
+void ShapeRegressorTrainer::StageSamples(int t) {
+  tbb::parallel_for(tbb::blocked_range<int>(0, N, 64), [&](const tbb::blocked_range<int>& range) {
+    for (int j = range.begin(); j < range.end(); ++j) {
+      sims_[j] = SimilarityFromMean(current_[j], r_.mean_shape);
+      const MatX2d& truth = shapes_[image_of_[j]];
+      for (int l = 0; l < L; ++l) {
+        const Cd y = (Point(truth, l) - Point(current_[j], l)) / sims_[j].c;
+        Y_(j, 2 * l) = static_cast<float>(y.real());
+        Y_(j, 2 * l + 1) = static_cast<float>(y.imag());
+      }
+      SamplePixels(r_, t, samplers_[image_of_[j]], current_[j], sims_[j], X_.row(j).data());
+    }
+  });
+}
+
+// One fern: F random unit directions in target space, drawn together (the
+// residuals do not change within a fern), a correlated pixel pair and a random
+// sample's threshold per direction, the bin outputs (ESR Eq. 7 / paper Eq. 4),
+// and the residuals' update.
+void ShapeRegressorTrainer::TrainFern(size_t fern, const Eigen::MatrixXd& Xc, const Eigen::MatrixXd& pixel_scatter,
+                                      Rng& srng) {
+  Eigen::MatrixXd V(D, F);
+  for (int f = 0; f < F; ++f) {
+    for (int d = 0; d < D; ++d) V(d, f) = srng.Normal();
+    V.col(f).normalize();
+  }
+  Eigen::MatrixXd Yv = Y_.cast<double>() * V;        // N×F projected targets
+  Yv.rowwise() -= Yv.colwise().mean();
+  const Eigen::MatrixXd target_pixel = Xc.transpose() * Yv;  // P×F
+  for (int f = 0; f < F; ++f) {
+    const PixelPair pair = SelectCorrelatedPair(pixel_scatter, target_pixel.col(f), Yv.col(f).squaredNorm());
+    corr_sum_ += std::abs(pair.correlation);
+    ++corr_count_;
+    const int sample = static_cast<int>(srng.UniformInt(static_cast<uint64_t>(N)));
+    r_.fern_pixel_a[fern * F + f] = static_cast<uint16_t>(pair.m);
+    r_.fern_pixel_b[fern * F + f] = static_cast<uint16_t>(pair.n);
+    r_.fern_threshold[fern * F + f] = X_(sample, pair.m) - X_(sample, pair.n);
+  }
+  for (int j = 0; j < N; ++j) bins_[j] = FernBin(r_, fern, X_.row(j).data());
+  // ESR Eq. 7 / paper Eq. 4: shrunk mean residual per bin.
+  const Eigen::MatrixXf out = FernBinOutputs(bins_, Y_, B, options_.shrinkage);
+  float* dst = r_.fern_output.data() + fern * B * D;
+  for (int b = 0; b < B; ++b) {
+    for (int d = 0; d < D; ++d) dst[static_cast<size_t>(b) * D + d] = out(b, d);
+  }
+  tbb::parallel_for(tbb::blocked_range<int>(0, N, 256), [&](const tbb::blocked_range<int>& range) {
+    for (int j = range.begin(); j < range.end(); ++j) {
+      const float* o = dst + static_cast<size_t>(bins_[j]) * D;
+      for (int d = 0; d < D; ++d) {
+        U_(j, d) += o[d];
+        Y_(j, d) -= o[d];
+      }
+    }
+  });
+}
+
+void ShapeRegressorTrainer::FinishReport() {
+  result_.report.num_images = n_img;
+  result_.report.num_samples = N;
+  result_.report.mean_abs_correlation = corr_count_ ? corr_sum_ / corr_count_ : 0.0;
+}
+
+}  // namespace
+
+ShapeRegressorTrainingResult TrainShapeRegressor(const std::vector<cv::Mat>& images,
+                                                 const std::vector<MatX2d>& shapes,
+                                                 const ShapeRegressorOptions& options) {
+  const auto start = std::chrono::steady_clock::now();
+  options.Check();
+  const int L = RequireTrainingSet(images, shapes);
+  ShapeRegressorTrainingResult result;
+  ShapeRegressorTrainer trainer(images, shapes, options, L, &result);
+  Rng rng(options.seed);
+  trainer.InitialShapes(rng.Fork(0));
+  trainer.ReportError();
+  for (int t = 0; t < options.num_stages; ++t) {
+    Rng srng = rng.Fork(1 + static_cast<uint64_t>(t));
+    trainer.TrainStage(t, srng);
+    trainer.ReportError();
+  }
+  trainer.FinishReport();
   result.report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
 }
