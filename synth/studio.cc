@@ -185,6 +185,175 @@ void PadOutsideChart(const cv::Mat& inside, int rings, const std::vector<cv::Mat
   }
 }
 
+
+// True when rig vertex v belongs to the face part (every vertex does when the rig
+// has no face part or no parts).
+bool IsFaceVertex(const FaceRig& rig, int face_part, int v) {
+  return face_part < 0 || rig.vertex_part.empty() || rig.vertex_part[v] == face_part;
+}
+
+bool IsFaceTriangle(const FaceRig& rig, int face_part, const Eigen::Vector3i& t) {
+  return IsFaceVertex(rig, face_part, t[0]) && IsFaceVertex(rig, face_part, t[1]) &&
+         IsFaceVertex(rig, face_part, t[2]);
+}
+
+// Camera: looking at the landmarks' centre (or the face's) from the front.
+// `head_centre`: the centre of the head's bounding box, at the landmarks' height.
+Camera FrontCamera(const FaceRig& rig, const StudioOptions& options, Eigen::Vector3d* head_centre) {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  if (!rig.landmarks.empty()) {
+    for (const auto& l : rig.landmarks) centre += rig.neutral.V.row(l.vertex).transpose();
+    centre /= static_cast<double>(rig.landmarks.size());
+  } else {
+    const auto [lo, hi] = BoundingBox(rig.neutral);
+    centre = 0.5 * (lo + hi);
+  }
+  const auto [lo, hi] = BoundingBox(rig.neutral);
+  *head_centre = Eigen::Vector3d(0.5 * (lo.x() + hi.x()), centre.y(), 0.5 * (lo.z() + hi.z()));
+  return LookAtCamera(CameraIntrinsics::FromFov(options.fov_deg, options.width, options.height),
+                      centre + Eigen::Vector3d(0, 0, options.distance_mm), centre, Eigen::Vector3d::UnitY());
+}
+
+// The rig's triangles split: the non-face ones appended to `faces`, their vertices
+// after the hi-res face's `hires_vertices`; the face ones to `underlay_faces`, over
+// new underlay vertices whose rig vertex is appended to `underlay_source`.
+void SplitRigTriangles(const FaceRig& rig, int face_part, int hires_vertices, std::vector<Eigen::Vector3i>* faces,
+                       std::vector<Eigen::Vector3i>* underlay_faces, std::vector<int>* underlay_source) {
+  std::vector<int> underlay_of(rig.num_vertices(), -1);
+  for (int f = 0; f < rig.neutral.num_faces(); ++f) {
+    const Eigen::Vector3i t = rig.neutral.F.row(f).transpose();
+    if (IsFaceTriangle(rig, face_part, t)) {
+      Eigen::Vector3i u;
+      for (int k = 0; k < 3; ++k) {
+        if (underlay_of[t[k]] < 0) {
+          underlay_of[t[k]] = static_cast<int>(underlay_source->size());
+          underlay_source->push_back(t[k]);
+        }
+        u[k] = underlay_of[t[k]];
+      }
+      underlay_faces->push_back(u);
+    } else {
+      faces->emplace_back(t + Eigen::Vector3i::Constant(hires_vertices));
+    }
+  }
+}
+
+// Each rig vertex's distance from the face's rim over the edges of the
+// `num_face_triangles` face triangles (Dijkstra, neutral lengths). The rim: face
+// vertices that also belong to a non-face triangle, or that sit exactly where a
+// non-face vertex sits (rigs, like crease's procedural head, may give the face its
+// own copies of the seam's vertices). A rig that is all face has no seam: the
+// distance is infinite, and the underlay stays deep everywhere.
+Eigen::VectorXd RimDistance(const FaceRig& rig, int face_part, size_t num_face_triangles) {
+  const int nr = rig.num_vertices();
+  std::vector<uint8_t> rim(nr, 0);
+  std::set<std::array<double, 3>> seam;
+  for (int f = 0; f < rig.neutral.num_faces(); ++f) {
+    const Eigen::Vector3i t = rig.neutral.F.row(f).transpose();
+    if (!IsFaceTriangle(rig, face_part, t)) {
+      for (int k = 0; k < 3; ++k) {
+        rim[t[k]] = 1;
+        seam.insert({rig.neutral.V(t[k], 0), rig.neutral.V(t[k], 1), rig.neutral.V(t[k], 2)});
+      }
+    }
+  }
+  for (int v = 0; v < nr; ++v) {
+    if (seam.count({rig.neutral.V(v, 0), rig.neutral.V(v, 1), rig.neutral.V(v, 2)})) rim[v] = 1;
+  }
+  TriMesh face_mesh;  // the face triangles, rig vertex ids
+  face_mesh.V = rig.neutral.V;
+  face_mesh.F.resize(static_cast<Eigen::Index>(num_face_triangles), 3);
+  Eigen::Index face_rows = 0;
+  for (int f = 0; f < rig.neutral.num_faces(); ++f) {
+    const Eigen::Vector3i t = rig.neutral.F.row(f).transpose();
+    if (IsFaceTriangle(rig, face_part, t)) face_mesh.F.row(face_rows++) = t.transpose();
+  }
+  std::vector<int> rim_vertices;
+  for (int v = 0; v < nr; ++v) {
+    if (rim[v] && IsFaceVertex(rig, face_part, v)) rim_vertices.push_back(v);
+  }
+  return rim_vertices.empty() ? Eigen::VectorXd::Constant(nr, std::numeric_limits<double>::infinity())
+                              : DijkstraDistance(face_mesh, rim_vertices);
+}
+
+// Towards the seam the face's maps blend into the uniform material of the parts
+// it meets (the mean albedo `skin_tone`, the nominal specular and roughness), so
+// the seam shows no change of colour or sheen; then texels outside the chart
+// (`red` = 0) are padded.
+void BlendSkinTowardsSeam(const FaceRig& rig, const ActorModel& model, const cv::Mat& red,
+                          const Eigen::Vector3f& skin_tone, SceneMaterials* materials) {
+  const float nominal_specular = MaterialPreset("skin").specular;
+  const Eigen::Vector3f hair_tone = model.skin().hair_color;
+  const cv::Mat& painted_hair_map = model.skin().hair;
+  const int size = materials->albedo.rows;
+  const cv::Mat fade = ChartRimFade(rig, size, model.anchors().mm_per_uv, kSkinRimBlendMm, /*outer_rim_only=*/true);
+  const float nominal_roughness = MaterialPreset("skin").roughness;
+  for (int j = 0; j < size; ++j) {
+    for (int i = 0; i < size; ++i) {
+      const float w = fade.at<float>(j, i);
+      if (w >= 1.0f) continue;
+      cv::Vec3f& a = materials->albedo.at<cv::Vec3f>(j, i);
+      if (a[0] <= 0.0f) continue;  // outside the chart
+      // The scalp's painted hair meets the part "scalp_hair", the rest the skin-toned parts.
+      const float h = painted_hair_map.empty() ? 0.0f : painted_hair_map.at<float>(j, i);
+      for (int k = 0; k < 3; ++k) a[k] = w * a[k] + (1.0f - w) * ((1.0f - h) * skin_tone[k] + h * hair_tone[k]);
+      float& sp = materials->specular.at<float>(j, i);
+      sp = w * sp + (1.0f - w) * nominal_specular;
+      float& ro = materials->roughness.at<float>(j, i);
+      ro = w * ro + (1.0f - w) * nominal_roughness;
+    }
+  }
+  PadOutsideChart(red > 0, 4, {&materials->albedo, &materials->specular, &materials->roughness});
+}
+
+// Materials of the scene's `total` vertices: part 0 = textured skin (hi-res face,
+// underlay, the rig's face part), 1 + p = rig part p, last = occluder (from
+// vertex `occluder_first`, -1: none).
+SceneMaterials StudioMaterials(const FaceRig& rig, const ActorModel& model, int total, int hires_vertices,
+                               int occluder_first) {
+  SceneMaterials materials;
+  materials.albedo = model.skin().albedo.clone();  // blended towards the seam below
+  // The actor's skin maps are in physical terms (synth/skin.h): a specular weight
+  // with 1 = nominal skin, and GGX α. The renderer takes the specular intensity ρ_s
+  // in [0, 1] (nominal skin 0.5, MaterialPreset("skin")) and the perceptual
+  // roughness r with α = r².
+  const float nominal_specular = MaterialPreset("skin").specular;
+  cv::Mat spec = model.skin().specular * nominal_specular;
+  cv::min(spec, 1.0, materials.specular);
+  cv::max(materials.specular, 0.0, materials.specular);
+  cv::Mat alpha;
+  cv::max(model.skin().roughness, 0.02f * 0.02f, alpha);
+  cv::sqrt(alpha, materials.roughness);
+  cv::Mat red;
+  cv::extractChannel(materials.albedo, red, 0);
+  const cv::Scalar mean_albedo = cv::mean(materials.albedo, red > 0);
+  const Eigen::Vector3f skin_tone(static_cast<float>(mean_albedo[0]), static_cast<float>(mean_albedo[1]),
+                                  static_cast<float>(mean_albedo[2]));
+  const Eigen::Vector3f hair_tone = model.skin().hair_color;
+  BlendSkinTowardsSeam(rig, model, red, skin_tone, &materials);
+
+  Material face = MaterialPreset("skin");
+  face.textured = true;
+  materials.part_materials.push_back(face);
+  const bool painted_hair = !model.skin().hair.empty() && cv::countNonZero(model.skin().hair > 0.5f) > 0;
+  for (const auto& name : rig.part_names) {
+    Material m = name == "face" ? face : PartMaterial(name, skin_tone);
+    if (name == "scalp_hair" && painted_hair) m.albedo = hair_tone;  // the same colour as the chart's painted hair
+    materials.part_materials.push_back(m);
+  }
+  Material occluder = MaterialPreset("grey");
+  occluder.textured = false;
+  materials.part_materials.push_back(occluder);
+  const int occluder_part = static_cast<int>(materials.part_materials.size()) - 1;
+  const int nr = rig.num_vertices();
+  materials.vertex_part.assign(total, 0);
+  for (int v = 0; v < nr; ++v) {
+    materials.vertex_part[hires_vertices + v] = rig.vertex_part.empty() ? 0 : 1 + rig.vertex_part[v];
+  }
+  for (int v = occluder_first >= 0 ? occluder_first : total; v < total; ++v) materials.vertex_part[v] = occluder_part;
+  return materials;
+}
+
 }  // namespace
 
 struct Studio::Scene {
@@ -208,80 +377,17 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
   Scene& s = *scene_;
   s.rig = rig;
   s.face_part = rig.PartIndex("face");
-  auto is_face = [&](int v) { return s.face_part < 0 || rig.vertex_part.empty() || rig.vertex_part[v] == s.face_part; };
-
-  // Camera: looking at the landmarks' centre (or the face's) from the front.
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  if (!rig.landmarks.empty()) {
-    for (const auto& l : rig.landmarks) centre += rig.neutral.V.row(l.vertex).transpose();
-    centre /= static_cast<double>(rig.landmarks.size());
-  } else {
-    const auto [lo, hi] = BoundingBox(rig.neutral);
-    centre = 0.5 * (lo + hi);
-  }
-  const auto [lo, hi] = BoundingBox(rig.neutral);
-  head_centre_ = Eigen::Vector3d(0.5 * (lo.x() + hi.x()), centre.y(), 0.5 * (lo.z() + hi.z()));
-  camera_ = LookAtCamera(CameraIntrinsics::FromFov(options_.fov_deg, options_.width, options_.height),
-                         centre + Eigen::Vector3d(0, 0, options_.distance_mm), centre, Eigen::Vector3d::UnitY());
+  camera_ = FrontCamera(rig, options_, &head_centre_);
 
   // Topology: hi-res face | rig (non-face triangles) | underlay (face triangles, pushed in) | occluder.
   const ActorFrame f0 = model_->Frame(Eigen::VectorXd::Zero(rig.num_expressions()), true);
   s.hires_vertices = f0.hires.num_vertices();
   const int nr = rig.num_vertices();
-  std::vector<int> underlay_of(nr, -1);
   std::vector<Eigen::Vector3i> faces;
   for (int f = 0; f < f0.hires.num_faces(); ++f) faces.emplace_back(f0.hires.F.row(f).transpose());
   std::vector<Eigen::Vector3i> underlay_faces;
-  for (int f = 0; f < rig.neutral.num_faces(); ++f) {
-    const Eigen::Vector3i t = rig.neutral.F.row(f).transpose();
-    if (is_face(t[0]) && is_face(t[1]) && is_face(t[2])) {
-      Eigen::Vector3i u;
-      for (int k = 0; k < 3; ++k) {
-        if (underlay_of[t[k]] < 0) {
-          underlay_of[t[k]] = static_cast<int>(s.underlay_source.size());
-          s.underlay_source.push_back(t[k]);
-        }
-        u[k] = underlay_of[t[k]];
-      }
-      underlay_faces.push_back(u);
-    } else {
-      faces.emplace_back(t + Eigen::Vector3i::Constant(s.hires_vertices));
-    }
-  }
-  // The rim: face vertices that also belong to a non-face triangle, or that sit
-  // exactly where a non-face vertex sits (rigs, like crease's procedural head, may
-  // give the face its own copies of the seam's vertices).
-  std::vector<uint8_t> rim(nr, 0);
-  std::set<std::array<double, 3>> seam;
-  for (int f = 0; f < rig.neutral.num_faces(); ++f) {
-    const Eigen::Vector3i t = rig.neutral.F.row(f).transpose();
-    if (!(is_face(t[0]) && is_face(t[1]) && is_face(t[2]))) {
-      for (int k = 0; k < 3; ++k) {
-        rim[t[k]] = 1;
-        seam.insert({rig.neutral.V(t[k], 0), rig.neutral.V(t[k], 1), rig.neutral.V(t[k], 2)});
-      }
-    }
-  }
-  for (int v = 0; v < nr; ++v) {
-    if (seam.count({rig.neutral.V(v, 0), rig.neutral.V(v, 1), rig.neutral.V(v, 2)})) rim[v] = 1;
-  }
-  // Distance from the rim over the face triangles' edges (Dijkstra, neutral lengths).
-  TriMesh face_mesh;  // the face triangles, rig vertex ids
-  face_mesh.V = rig.neutral.V;
-  face_mesh.F.resize(static_cast<Eigen::Index>(underlay_faces.size()), 3);
-  Eigen::Index face_rows = 0;
-  for (int f = 0; f < rig.neutral.num_faces(); ++f) {
-    const Eigen::Vector3i t = rig.neutral.F.row(f).transpose();
-    if (is_face(t[0]) && is_face(t[1]) && is_face(t[2])) face_mesh.F.row(face_rows++) = t.transpose();
-  }
-  std::vector<int> rim_vertices;
-  for (int v = 0; v < nr; ++v) {
-    if (rim[v] && is_face(v)) rim_vertices.push_back(v);
-  }
-  // (A rig that is all face has no seam: the underlay stays deep everywhere.)
-  const Eigen::VectorXd rim_distance = rim_vertices.empty()
-                                           ? Eigen::VectorXd::Constant(nr, std::numeric_limits<double>::infinity())
-                                           : DijkstraDistance(face_mesh, rim_vertices);
+  SplitRigTriangles(rig, s.face_part, s.hires_vertices, &faces, &underlay_faces, &s.underlay_source);
+  const Eigen::VectorXd rim_distance = RimDistance(rig, s.face_part, underlay_faces.size());
   for (int v : s.underlay_source) {
     s.underlay_depth.push_back(std::min(kUnderlayDepthMm, kUnderlayRimDepthMm + kUnderlayDepthSlope * rim_distance[v]));
   }
@@ -306,70 +412,7 @@ Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& opti
   mesh.UV.middleRows(s.hires_vertices, nr) = rig.neutral.UV;
   for (int i = 0; i < nu; ++i) mesh.UV.row(underlay_first + i) = rig.neutral.UV.row(s.underlay_source[i]);
 
-  // Materials: part 0 = textured skin (hi-res face, underlay, the rig's face part),
-  // 1 + p = rig part p, last = occluder.
-  SceneMaterials materials;
-  materials.albedo = model_->skin().albedo.clone();  // blended towards the seam below
-  // The actor's skin maps are in physical terms (synth/skin.h): a specular weight
-  // with 1 = nominal skin, and GGX α. The renderer takes the specular intensity ρ_s
-  // in [0, 1] (nominal skin 0.5, MaterialPreset("skin")) and the perceptual
-  // roughness r with α = r².
-  const float nominal_specular = MaterialPreset("skin").specular;
-  cv::Mat spec = model_->skin().specular * nominal_specular;
-  cv::min(spec, 1.0, materials.specular);
-  cv::max(materials.specular, 0.0, materials.specular);
-  cv::Mat alpha;
-  cv::max(model_->skin().roughness, 0.02f * 0.02f, alpha);
-  cv::sqrt(alpha, materials.roughness);
-  cv::Mat red;
-  cv::extractChannel(materials.albedo, red, 0);
-  const cv::Scalar mean_albedo = cv::mean(materials.albedo, red > 0);
-  const Eigen::Vector3f skin_tone(static_cast<float>(mean_albedo[0]), static_cast<float>(mean_albedo[1]),
-                                  static_cast<float>(mean_albedo[2]));
-  const Eigen::Vector3f hair_tone = model_->skin().hair_color;
-  const cv::Mat& painted_hair_map = model_->skin().hair;
-  {
-    // Towards the seam the face's maps blend into the uniform material of the parts
-    // it meets (the mean albedo, the nominal specular and roughness), so the seam
-    // shows no change of colour or sheen.
-    const int size = materials.albedo.rows;
-    const cv::Mat fade = ChartRimFade(rig, size, model_->anchors().mm_per_uv, kSkinRimBlendMm, /*outer_rim_only=*/true);
-    const float nominal_roughness = MaterialPreset("skin").roughness;
-    for (int j = 0; j < size; ++j) {
-      for (int i = 0; i < size; ++i) {
-        const float w = fade.at<float>(j, i);
-        if (w >= 1.0f) continue;
-        cv::Vec3f& a = materials.albedo.at<cv::Vec3f>(j, i);
-        if (a[0] <= 0.0f) continue;  // outside the chart
-        // The scalp's painted hair meets the part "scalp_hair", the rest the skin-toned parts.
-        const float h = painted_hair_map.empty() ? 0.0f : painted_hair_map.at<float>(j, i);
-        for (int k = 0; k < 3; ++k) a[k] = w * a[k] + (1.0f - w) * ((1.0f - h) * skin_tone[k] + h * hair_tone[k]);
-        float& sp = materials.specular.at<float>(j, i);
-        sp = w * sp + (1.0f - w) * nominal_specular;
-        float& ro = materials.roughness.at<float>(j, i);
-        ro = w * ro + (1.0f - w) * nominal_roughness;
-      }
-    }
-    PadOutsideChart(red > 0, 4, {&materials.albedo, &materials.specular, &materials.roughness});
-  }
-  Material face = MaterialPreset("skin");
-  face.textured = true;
-  materials.part_materials.push_back(face);
-  const bool painted_hair = !model_->skin().hair.empty() && cv::countNonZero(model_->skin().hair > 0.5f) > 0;
-  for (const auto& name : rig.part_names) {
-    Material m = name == "face" ? face : PartMaterial(name, skin_tone);
-    if (name == "scalp_hair" && painted_hair) m.albedo = hair_tone;  // the same colour as the chart's painted hair
-    materials.part_materials.push_back(m);
-  }
-  Material occluder = MaterialPreset("grey");
-  occluder.textured = false;
-  materials.part_materials.push_back(occluder);
-  const int occluder_part = static_cast<int>(materials.part_materials.size()) - 1;
-  materials.vertex_part.assign(total, 0);
-  for (int v = 0; v < nr; ++v) {
-    materials.vertex_part[s.hires_vertices + v] = rig.vertex_part.empty() ? 0 : 1 + rig.vertex_part[v];
-  }
-  for (int v = s.occluder_first >= 0 ? s.occluder_first : total; v < total; ++v) materials.vertex_part[v] = occluder_part;
+  SceneMaterials materials = StudioMaterials(rig, *model_, total, s.hires_vertices, s.occluder_first);
   SequenceFrame rest;
   mesh.V = SceneVertices(f0, rest, WorldFromHead(rest));
   s.renderer = std::make_unique<Renderer>(mesh, std::move(materials), RendererOptions{}, "studio scene");
