@@ -24,6 +24,172 @@ void HifiMeshOptions::Check() const {
   CheckLe(o, "hifi_mesh_resolution", hifi_mesh_resolution, 8192);
 }
 
+namespace {
+
+// Orientation of the chart in UV (u right, v down): true when counter-clockwise
+// (outward) triangles have negative UV area, by majority.
+bool ChartIsFlipped(const TriMesh& chart) {
+  long positive = 0, negative = 0;
+  for (int f = 0; f < chart.F.rows(); ++f) {
+    const Eigen::Vector2d a = chart.UV.row(chart.F(f, 0)).transpose();
+    const Eigen::Vector2d b = chart.UV.row(chart.F(f, 1)).transpose();
+    const Eigen::Vector2d c = chart.UV.row(chart.F(f, 2)).transpose();
+    const double area = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
+    if (area > 0) ++positive;
+    if (area < 0) ++negative;
+  }
+  return negative > positive;
+}
+
+// The boundary edges of a chart (edges of one chart triangle only) on the N × N
+// grid: the outer boundary where it is concave, and the slits of the eyelids and
+// lips, which are opened slightly in UV. Two grid vertices may be joined when the
+// segment between them crosses none of them. The edges are bucketed by grid cell
+// (CSR).
+class ChartBoundary {
+ public:
+  ChartBoundary(const TriMesh& chart, int N);
+  // True when the segment between grid nodes p and q (grid coordinates) properly
+  // crosses a boundary edge.
+  bool Crosses(const Eigen::Vector2d& p, const Eigen::Vector2d& q) const;
+
+ private:
+  void BucketRange(double lo, double hi, int* b0, int* b1) const {
+    *b0 = std::clamp(static_cast<int>(std::floor(lo)), 0, N_ - 1);
+    *b1 = std::clamp(static_cast<int>(std::floor(hi)), 0, N_ - 1);
+  }
+
+  int N_;
+  std::vector<std::array<Eigen::Vector2d, 2>> boundary_;  // in grid coordinates X = u·N − 0.5
+  std::vector<int> bucket_offset_, bucket_edges_;
+};
+
+ChartBoundary::ChartBoundary(const TriMesh& chart, int N) : N_(N) {
+  std::vector<std::pair<int, int>> edges;  // (min vertex, max vertex) of every triangle edge
+  edges.reserve(static_cast<size_t>(chart.F.rows()) * 3);
+  for (int f = 0; f < chart.F.rows(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const int a = chart.F(f, k), b = chart.F(f, (k + 1) % 3);
+      edges.emplace_back(std::min(a, b), std::max(a, b));
+    }
+  }
+  std::sort(edges.begin(), edges.end());
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j] == edges[i]) ++j;
+    if (j - i == 1) {
+      auto grid = [&](int v) { return Eigen::Vector2d(chart.UV(v, 0) * N - 0.5, chart.UV(v, 1) * N - 0.5); };
+      boundary_.push_back({grid(edges[i].first), grid(edges[i].second)});
+    }
+    i = j;
+  }
+  // Two passes: count the edges of every cell, then fill.
+  bucket_offset_.assign(static_cast<size_t>(N) * N + 1, 0);
+  for (int pass = 0; pass < 2; ++pass) {
+    std::vector<int> cursor;
+    if (pass == 1) {
+      for (size_t b = 0; b + 1 < bucket_offset_.size(); ++b) bucket_offset_[b + 1] += bucket_offset_[b];
+      bucket_edges_.resize(static_cast<size_t>(bucket_offset_.back()));
+      cursor.assign(bucket_offset_.begin(), bucket_offset_.end() - 1);
+    }
+    for (size_t e = 0; e < boundary_.size(); ++e) {
+      const auto& [p, q] = boundary_[e];
+      int x0, x1, y0, y1;
+      BucketRange(std::min(p.x(), q.x()), std::max(p.x(), q.x()), &x0, &x1);
+      BucketRange(std::min(p.y(), q.y()), std::max(p.y(), q.y()), &y0, &y1);
+      for (int y = y0; y <= y1; ++y) {
+        for (int x = x0; x <= x1; ++x) {
+          const size_t b = static_cast<size_t>(y) * N + x;
+          if (pass == 0) {
+            ++bucket_offset_[b + 1];
+          } else {
+            bucket_edges_[static_cast<size_t>(cursor[b]++)] = static_cast<int>(e);
+          }
+        }
+      }
+    }
+  }
+}
+
+bool ChartBoundary::Crosses(const Eigen::Vector2d& p, const Eigen::Vector2d& q) const {
+  auto cross2 = [](const Eigen::Vector2d& o, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
+    return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
+  };
+  int x0, x1, y0, y1;
+  BucketRange(std::min(p.x(), q.x()), std::max(p.x(), q.x()), &x0, &x1);
+  BucketRange(std::min(p.y(), q.y()), std::max(p.y(), q.y()), &y0, &y1);
+  for (int y = y0; y <= y1; ++y) {
+    for (int x = x0; x <= x1; ++x) {
+      const size_t b = static_cast<size_t>(y) * N_ + x;
+      for (int k = bucket_offset_[b]; k < bucket_offset_[b + 1]; ++k) {
+        const auto& [a, c] = boundary_[static_cast<size_t>(bucket_edges_[static_cast<size_t>(k)])];
+        // Proper crossing of segments pq and ac.
+        if (cross2(p, q, a) * cross2(p, q, c) < 0 && cross2(a, c, p) * cross2(a, c, q) < 0) return true;
+      }
+    }
+  }
+  return false;
+}
+
+// The dense triangles: two per grid cell with four vertices, one where a corner is
+// missing, each kept when none of its edges crosses the chart's boundary; wound
+// like the chart (`flip`).
+std::vector<Eigen::Vector3i> GridTriangles(int N, const std::vector<int>& vertex_of_node, const std::vector<int>& node,
+                                           const ChartBoundary& boundary, bool flip) {
+  auto joinable = [&](int g, int h) {
+    const int ng = node[static_cast<size_t>(g)], nh = node[static_cast<size_t>(h)];
+    const Eigen::Vector2d p(ng % N, ng / N), q(nh % N, nh / N);
+    return !boundary.Crosses(p, q);
+  };
+  std::vector<Eigen::Vector3i> faces;
+  faces.reserve(node.size() * 2);
+  const int cells = N - 1;
+  auto add = [&](int p, int q, int r) {
+    if (p < 0 || q < 0 || r < 0) return false;
+    if (!joinable(p, q) || !joinable(q, r) || !joinable(p, r)) return false;
+    faces.push_back(flip ? Eigen::Vector3i(p, r, q) : Eigen::Vector3i(p, q, r));
+    return true;
+  };
+  for (int b = 0; b < cells; ++b) {
+    for (int a = 0; a < cells; ++a) {
+      // Corners: c00 = (a, b), c10 = (a+1, b), c01 = (a, b+1), c11 = (a+1, b+1);
+      // each triangle below has positive UV area (u right, v down).
+      const int c00 = vertex_of_node[static_cast<size_t>(b) * N + a];
+      const int c10 = vertex_of_node[static_cast<size_t>(b) * N + a + 1];
+      const int c01 = vertex_of_node[static_cast<size_t>(b + 1) * N + a];
+      const int c11 = vertex_of_node[static_cast<size_t>(b + 1) * N + a + 1];
+      const int present = (c00 >= 0) + (c10 >= 0) + (c01 >= 0) + (c11 >= 0);
+      if (present == 4) {
+        add(c00, c10, c11);
+        add(c00, c11, c01);
+      } else if (present == 3) {
+        if (c11 < 0) add(c00, c10, c01);
+        if (c00 < 0) add(c10, c11, c01);
+        if (c10 < 0) add(c00, c11, c01);
+        if (c01 < 0) add(c00, c10, c11);
+      }
+    }
+  }
+  return faces;
+}
+
+// Per vertex g of the nv, its triangles: vertex_faces[offset[g] .. offset[g + 1]) (CSR).
+void IndexVertexFaces(const std::vector<Eigen::Vector3i>& faces, int nv, std::vector<int>* offset,
+                      std::vector<int>* vertex_faces) {
+  offset->assign(static_cast<size_t>(nv) + 1, 0);
+  for (const Eigen::Vector3i& t : faces) {
+    for (int k = 0; k < 3; ++k) ++(*offset)[static_cast<size_t>(t[k]) + 1];
+  }
+  for (int v = 0; v < nv; ++v) (*offset)[static_cast<size_t>(v) + 1] += (*offset)[static_cast<size_t>(v)];
+  vertex_faces->resize(static_cast<size_t>(offset->back()));
+  std::vector<int> cursor(offset->begin(), offset->end() - 1);
+  for (size_t f = 0; f < faces.size(); ++f) {
+    for (int k = 0; k < 3; ++k) (*vertex_faces)[static_cast<size_t>(cursor[static_cast<size_t>(faces[f][k])]++)] = static_cast<int>(f);
+  }
+}
+
+}  // namespace
+
 struct HifiMeshBuilder::Impl {
   int N = 0;             // grid vertices per side
   int num_rig_vertices = 0;
@@ -58,19 +224,7 @@ HifiMeshBuilder::HifiMeshBuilder(const FaceRig& rig, const HifiMeshOptions& opti
   chart.F = FaceChartTriangles(rig);
   m.coarse_F = chart.F;
   const UvRaster raster = RasterizeUv(chart, m.N, m.N, "HifiMeshBuilder face chart");
-
-  // Orientation of the chart in UV (u right, v down): the sign of the UV area of
-  // counter-clockwise (outward) triangles, by majority.
-  long positive = 0, negative = 0;
-  for (int f = 0; f < chart.F.rows(); ++f) {
-    const Eigen::Vector2d a = chart.UV.row(chart.F(f, 0)).transpose();
-    const Eigen::Vector2d b = chart.UV.row(chart.F(f, 1)).transpose();
-    const Eigen::Vector2d c = chart.UV.row(chart.F(f, 2)).transpose();
-    const double area = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
-    if (area > 0) ++positive;
-    if (area < 0) ++negative;
-  }
-  const bool flip = negative > positive;
+  const bool flip = ChartIsFlipped(chart);
 
   // Grid vertices.
   const int N = m.N;
@@ -94,124 +248,11 @@ HifiMeshBuilder::HifiMeshBuilder(const FaceRig& rig, const HifiMeshOptions& opti
     m.UV(v, 1) = (m.node[static_cast<size_t>(v)] / N + 0.5) / N;
   }
 
-  // Two grid vertices may be joined when the UV segment between them crosses no
-  // boundary edge of the chart (an edge of one chart triangle only): the outer
-  // boundary where it is concave, and the slits of the eyelids and lips, which
-  // are opened slightly in UV. Boundary edges are bucketed by grid cell (CSR).
-  std::vector<std::array<Eigen::Vector2d, 2>> boundary;  // in grid coordinates X = u·N − 0.5
-  {
-    std::vector<std::pair<int, int>> edges;  // (min vertex, max vertex) of every triangle edge
-    edges.reserve(static_cast<size_t>(chart.F.rows()) * 3);
-    for (int f = 0; f < chart.F.rows(); ++f) {
-      for (int k = 0; k < 3; ++k) {
-        const int a = chart.F(f, k), b = chart.F(f, (k + 1) % 3);
-        edges.emplace_back(std::min(a, b), std::max(a, b));
-      }
-    }
-    std::sort(edges.begin(), edges.end());
-    for (size_t i = 0; i < edges.size();) {
-      size_t j = i;
-      while (j < edges.size() && edges[j] == edges[i]) ++j;
-      if (j - i == 1) {
-        auto grid = [&](int v) { return Eigen::Vector2d(chart.UV(v, 0) * m.N - 0.5, chart.UV(v, 1) * m.N - 0.5); };
-        boundary.push_back({grid(edges[i].first), grid(edges[i].second)});
-      }
-      i = j;
-    }
-  }
-  auto bucket_range = [&](double lo, double hi, int* b0, int* b1) {
-    *b0 = std::clamp(static_cast<int>(std::floor(lo)), 0, N - 1);
-    *b1 = std::clamp(static_cast<int>(std::floor(hi)), 0, N - 1);
-  };
-  std::vector<int> bucket_offset(static_cast<size_t>(N) * N + 1, 0), bucket_edges;
-  for (int pass = 0; pass < 2; ++pass) {
-    std::vector<int> cursor;
-    if (pass == 1) {
-      for (size_t b = 0; b + 1 < bucket_offset.size(); ++b) bucket_offset[b + 1] += bucket_offset[b];
-      bucket_edges.resize(static_cast<size_t>(bucket_offset.back()));
-      cursor.assign(bucket_offset.begin(), bucket_offset.end() - 1);
-    }
-    for (size_t e = 0; e < boundary.size(); ++e) {
-      const auto& [p, q] = boundary[e];
-      int x0, x1, y0, y1;
-      bucket_range(std::min(p.x(), q.x()), std::max(p.x(), q.x()), &x0, &x1);
-      bucket_range(std::min(p.y(), q.y()), std::max(p.y(), q.y()), &y0, &y1);
-      for (int y = y0; y <= y1; ++y) {
-        for (int x = x0; x <= x1; ++x) {
-          const size_t b = static_cast<size_t>(y) * N + x;
-          if (pass == 0) {
-            ++bucket_offset[b + 1];
-          } else {
-            bucket_edges[static_cast<size_t>(cursor[b]++)] = static_cast<int>(e);
-          }
-        }
-      }
-    }
-  }
-  auto cross2 = [](const Eigen::Vector2d& o, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
-    return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
-  };
-  auto joinable = [&](int g, int h) {
-    const int ng = m.node[static_cast<size_t>(g)], nh = m.node[static_cast<size_t>(h)];
-    const Eigen::Vector2d p(ng % N, ng / N), q(nh % N, nh / N);
-    int x0, x1, y0, y1;
-    bucket_range(std::min(p.x(), q.x()), std::max(p.x(), q.x()), &x0, &x1);
-    bucket_range(std::min(p.y(), q.y()), std::max(p.y(), q.y()), &y0, &y1);
-    for (int y = y0; y <= y1; ++y) {
-      for (int x = x0; x <= x1; ++x) {
-        const size_t b = static_cast<size_t>(y) * N + x;
-        for (int k = bucket_offset[b]; k < bucket_offset[b + 1]; ++k) {
-          const auto& [a, c] = boundary[static_cast<size_t>(bucket_edges[static_cast<size_t>(k)])];
-          // Proper crossing of segments pq and ac.
-          if (cross2(p, q, a) * cross2(p, q, c) < 0 && cross2(a, c, p) * cross2(a, c, q) < 0) return false;
-        }
-      }
-    }
-    return true;
-  };
-  std::vector<Eigen::Vector3i> faces;
-  faces.reserve(static_cast<size_t>(nv) * 2);
-  const int cells = N - 1;
-  auto add = [&](int p, int q, int r) {
-    if (p < 0 || q < 0 || r < 0) return false;
-    if (!joinable(p, q) || !joinable(q, r) || !joinable(p, r)) return false;
-    faces.push_back(flip ? Eigen::Vector3i(p, r, q) : Eigen::Vector3i(p, q, r));
-    return true;
-  };
-  for (int b = 0; b < cells; ++b) {
-    for (int a = 0; a < cells; ++a) {
-      // Corners: c00 = (a, b), c10 = (a+1, b), c01 = (a, b+1), c11 = (a+1, b+1);
-      // each triangle below has positive UV area (u right, v down).
-      const int c00 = vertex_of_node[static_cast<size_t>(b) * N + a];
-      const int c10 = vertex_of_node[static_cast<size_t>(b) * N + a + 1];
-      const int c01 = vertex_of_node[static_cast<size_t>(b + 1) * N + a];
-      const int c11 = vertex_of_node[static_cast<size_t>(b + 1) * N + a + 1];
-      const int present = (c00 >= 0) + (c10 >= 0) + (c01 >= 0) + (c11 >= 0);
-      if (present == 4) {
-        add(c00, c10, c11);
-        add(c00, c11, c01);
-      } else if (present == 3) {
-        if (c11 < 0) add(c00, c10, c01);
-        if (c00 < 0) add(c10, c11, c01);
-        if (c10 < 0) add(c00, c11, c01);
-        if (c01 < 0) add(c00, c10, c11);
-      }
-    }
-  }
+  const ChartBoundary boundary(chart, N);
+  const std::vector<Eigen::Vector3i> faces = GridTriangles(N, vertex_of_node, m.node, boundary, flip);
   m.F.resize(static_cast<int>(faces.size()), 3);
   for (size_t f = 0; f < faces.size(); ++f) m.F.row(static_cast<int>(f)) = faces[f].transpose();
-  m.vertex_face_offset.assign(static_cast<size_t>(nv) + 1, 0);
-  for (const Eigen::Vector3i& t : faces) {
-    for (int k = 0; k < 3; ++k) ++m.vertex_face_offset[static_cast<size_t>(t[k]) + 1];
-  }
-  for (int v = 0; v < nv; ++v) m.vertex_face_offset[static_cast<size_t>(v) + 1] += m.vertex_face_offset[static_cast<size_t>(v)];
-  m.vertex_faces.resize(static_cast<size_t>(m.vertex_face_offset.back()));
-  {
-    std::vector<int> cursor(m.vertex_face_offset.begin(), m.vertex_face_offset.end() - 1);
-    for (size_t f = 0; f < faces.size(); ++f) {
-      for (int k = 0; k < 3; ++k) m.vertex_faces[static_cast<size_t>(cursor[static_cast<size_t>(faces[f][k])]++)] = static_cast<int>(f);
-    }
-  }
+  IndexVertexFaces(faces, nv, &m.vertex_face_offset, &m.vertex_faces);
   m.coarse_F_flat.assign(m.coarse_F.data(), m.coarse_F.data() + m.coarse_F.size());
 }
 
