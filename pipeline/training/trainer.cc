@@ -235,22 +235,286 @@ void FlattenByNeutral(const std::string& mode, const std::vector<std::string>& l
 
 }  // namespace
 
+namespace {
+
+// What the steps of ExtractTrainingPairs share: the inputs, the summary they fill,
+// the log, and where report pictures go (empty: none).
+struct ExtractionContext {
+  const FaceRig& rig;
+  const TrainingOptions& options;
+  const std::vector<std::string>& lights;  // the selected light rigs
+  const fs::path& report_dir;
+  TrainingSummary& sum;
+  const std::function<void(const std::string&)>& log_fn;
+
+  bool pictures() const { return !report_dir.empty(); }
+  void Log(const std::string& line) const {
+    if (log_fn) log_fn(line);
+  }
+};
+
+// The textures T^j of one actor's scans, one per scan and selected light rig, with
+// each one's light, coverage, name and the scan's displacement map D^j.
+struct ActorTextures {
+  std::vector<cv::Mat> gray, displacement, coverage;
+  std::vector<std::string> names, light;
+};
+
+// Sec. 4.1: the scan meshes of `actor` in `order` (neutral first), which must
+// share one topology, and their file names.
+void ReadActorScans(const ScanActor& actor, const std::vector<int>& order, std::vector<TriMesh>* meshes,
+                    std::vector<std::string>* names) {
+  for (int s : order) {
+    meshes->push_back(ReadMesh(actor.scans[s].mesh));
+    names->push_back(actor.scans[s].mesh.string());
+    Require(meshes->back().F == meshes->front().F,
+            fmt::format("{}: its triangles differ from the neutral scan {} (an actor's scans must share one "
+                        "topology)",
+                        names->back(), names->front()));
+  }
+}
+
+// Sec. 4.1: the rig fitted to all of the actor's scans; with closest-point
+// correspondences, the rig's UV layout then transferred from the fitted L^0 to
+// M^0, and every scan cut alike.
+RigFitResult FitRigToActor(const ExtractionContext& ctx, const std::string& actor_name, std::vector<TriMesh>* meshes,
+                           const std::vector<std::string>& names) {
+  auto t0 = Clock::now();
+  RigFitResult fit = FitRigToScans(ctx.rig, *meshes, names, ctx.options.fit);
+  ctx.sum.timing.Add("rig fit (Ceres)", Since(t0));
+  ctx.Log(fmt::format("{}: rig fit ({} correspondences) RMS {:.3f} mm, |identity| = {:.2f}", actor_name,
+                      fit.correspondence, fmt::join(fit.rms_mm, " / "), fit.identity.norm()));
+  if (fit.correspondence == "closest") {
+    t0 = Clock::now();
+    std::vector<int> kept;
+    const TriMesh cut =
+        TransferUvsFromRig(ctx.rig, fit.fitted[0], (*meshes)[0], ctx.options.fit.max_correspondence_mm, &kept);
+    for (auto& m : *meshes) {
+      TriMesh c = cut;
+      for (size_t i = 0; i < kept.size(); ++i) c.V.row(static_cast<int>(i)) = m.V.row(kept[i]);
+      m = std::move(c);
+    }
+    ctx.sum.timing.Add("UV transfer", Since(t0));
+    ctx.Log(fmt::format("{}: UVs transferred from the fitted rig to {} of the scan's vertices", actor_name,
+                        kept.size()));
+  }
+  return fit;
+}
+
+// Evaluation, not a step of the method (issue 18, item 3): the extracted D^j
+// against its ground truth `truth` within `mask`, over the face, each rig region
+// and, with validation_band_mm > 0, their wrinkle bands; logged.
+ScanAccuracy CompareWithTruth(const ExtractionContext& ctx, const std::string& actor, const std::string& scan,
+                              const cv::Mat& displacement, const cv::Mat& truth, const cv::Mat& mask,
+                              double mm_per_texel) {
+  const int R = ctx.options.detail.map_resolution;
+  ScanAccuracy acc;
+  acc.actor = actor;
+  acc.scan = scan;
+  acc.face = CompareMaps(displacement, truth, mask);
+  for (const auto& region : ctx.rig.regions) {
+    cv::Mat rm;
+    cv::bitwise_and(mask, ResizeMask(region.mask, R), rm);
+    acc.regions.emplace_back(region.name, CompareMaps(displacement, truth, rm));
+  }
+  if (ctx.options.validation_band_mm > 0.0) {
+    const double sigma = ctx.options.validation_band_mm / mm_per_texel;
+    const cv::Mat db = WrinkleBand(displacement, mask, sigma), tb = WrinkleBand(truth, mask, sigma);
+    acc.face_band = CompareMaps(db, tb, mask);
+    for (const auto& region : ctx.rig.regions) {
+      cv::Mat rm;
+      cv::bitwise_and(mask, ResizeMask(region.mask, R), rm);
+      acc.regions_band.emplace_back(region.name, CompareMaps(db, tb, rm));
+    }
+  }
+  ctx.Log(fmt::format("{}/{}: D^j vs ground truth: RMSE {:.4f} mm (GT RMS {:.4f}), correlation {:.3f}; wrinkle band: "
+                      "RMSE {:.4f} mm (GT RMS {:.4f}), correlation {:.3f}",
+                      actor, scan, acc.face.rmse_mm, acc.face.reference_rms_mm, acc.face.correlation,
+                      acc.face_band.rmse_mm, acc.face_band.reference_rms_mm, acc.face_band.correlation));
+  return acc;
+}
+
+// Report picture displacement_<actor>_<scan>.png: D^j, beside its ground truth
+// when `truth` is given, over ±`range` mm within `mask`.
+void WriteDisplacementPicture(const fs::path& report_dir, const std::string& actor, const std::string& scan,
+                              const cv::Mat& displacement, const cv::Mat& truth, const cv::Mat& mask, double range) {
+  cv::Mat picture = DisplacementPicture(displacement, range, mask);
+  if (!truth.empty()) {
+    cv::Mat both;
+    cv::hconcat(picture, DisplacementPicture(truth, range, mask), both);
+    picture = both;
+  }
+  WriteImage(report_dir / fmt::format("displacement_{}_{}.png", actor, scan), picture, {.srgb = false});
+}
+
+// Report picture texture_<actor>_<scan>.png: the linear colour texture in sRGB.
+void WriteTexturePicture(const fs::path& report_dir, const std::string& actor, const std::string& scan,
+                         const cv::Mat& color) {
+  cv::Mat srgb = color.clone();
+  for (int r = 0; r < srgb.rows; ++r) {
+    auto* p = srgb.ptr<float>(r);
+    for (int c = 0; c < srgb.cols * 3; ++c) p[c] = static_cast<float>(LinearToSrgb(std::clamp(p[c], 0.0f, 1.0f)));
+  }
+  cv::Mat out8;
+  srgb.convertTo(out8, CV_8UC3, 255.0);
+  WriteImage(report_dir / fmt::format("texture_{}_{}.png", actor, scan), out8, {.srgb = false});
+}
+
+// Sec. 4.1: D^j of one scan, timed; with training_targets = truth, the ground
+// truth instead. Where the scan set has ground truth (the expression's minus the
+// neutral's: D^j is relative to M_0^j, which carries the neutral's own detail,
+// static lines), D^j is compared with it; pictures.
+cv::Mat ScanDisplacement(const ExtractionContext& ctx, const std::string& actor, const ScanEntry& scan,
+                         const DetailExtractor& extractor, const MatX3d& V, const std::string& name,
+                         const cv::Mat& neutral_truth, double mm_per_texel) {
+  const int R = ctx.options.detail.map_resolution;
+  const auto t0 = Clock::now();
+  const ExtractedDetail detail = extractor.Extract(V, name);
+  ctx.sum.timing.Add("detail extraction D^j", Since(t0));
+  ctx.sum.timing.Add("  G^HF (conjugate gradients)", detail.seconds_hf);
+  ctx.sum.timing.Add("  G + deformation transfer", detail.seconds_transfer);
+  ctx.sum.timing.Add("  M_0^j and normals", detail.seconds_aligned);
+  ctx.sum.timing.Add("  rays (Embree)", detail.seconds_rays);
+  cv::Mat D = detail.displacement;
+  if (ctx.options.training_targets == "truth") {
+    Require(!scan.truth_displacement.empty() && !neutral_truth.empty(),
+            fmt::format("{}: training_targets = truth needs the scan set's ground truth (a studio scan set)", name));
+    D = ReadTruth(scan.truth_displacement, R) - neutral_truth;
+  }
+  if (!scan.truth_displacement.empty() && !neutral_truth.empty()) {
+    cv::Mat truth = ReadTruth(scan.truth_displacement, R) - neutral_truth;
+    cv::Mat mask;
+    cv::bitwise_and(extractor.coverage(), detail.valid, mask);
+    ScanAccuracy acc = CompareWithTruth(ctx, actor, scan.name, detail.displacement, truth, mask, mm_per_texel);
+    if (ctx.pictures()) {
+      WriteDisplacementPicture(ctx.report_dir, actor, scan.name, detail.displacement, truth, mask,
+                               std::max(0.05, 3.0 * acc.face.reference_rms_mm));
+    }
+    ctx.sum.accuracy.push_back(std::move(acc));
+  } else if (ctx.pictures()) {
+    WriteDisplacementPicture(ctx.report_dir, actor, scan.name, detail.displacement, cv::Mat(), detail.valid, 0.3);
+  }
+  return D;
+}
+
+// The textures T^j of one scan: one per selected light rig, from that rig's
+// images, appended to `textures` with the scan's displacement D.
+void ExtractScanTextures(const ExtractionContext& ctx, const std::string& actor, const ScanEntry& scan,
+                         const TriMesh& mesh, const std::string& name, const UvRaster& raster, const cv::Mat& D,
+                         ActorTextures* textures) {
+  const auto t0 = Clock::now();
+  const RayCaster caster(mesh, {}, name);
+  for (const auto& light : ctx.lights) {
+    std::vector<Camera> cams;
+    std::vector<cv::Mat> images;
+    for (const auto& im : scan.images) {
+      if (im.light != light) continue;
+      cams.push_back(ReadCamera(im.camera));
+      images.push_back(ReadImage(im.image));
+      Require(images.back().channels() == 3 || images.back().channels() == 1,
+              fmt::format("{}: expected an RGB or gray image", im.image.string()));
+    }
+    if (cams.empty()) continue;
+    const ExtractedTexture tex = ExtractTexture(mesh, raster, &caster, cams, images, ctx.options.texture);
+    textures->gray.push_back(tex.gray);
+    textures->light.push_back(light);
+    textures->coverage.push_back(tex.seen);
+    textures->displacement.push_back(D);
+    textures->names.push_back(fmt::format("{}/{}/{}", actor, scan.name, light));
+    if (ctx.pictures() && light == ctx.lights.front()) WriteTexturePicture(ctx.report_dir, actor, scan.name, tex.color);
+  }
+  ctx.sum.timing.Add("texture extraction T^j", Since(t0));
+}
+
+// Sec. 4.2: the actor's wrinkle map (from its textures, over the texels that
+// every texture and the detail extraction cover), the patch layout, and the
+// training pairs (t, d).
+TrainingPatches ActorPatchPairs(const ExtractionContext& ctx, const std::string& actor, const cv::Mat& detail_coverage,
+                                ActorTextures* textures, ActorSummary* as) {
+  const TrainingOptions& options = ctx.options;
+  const auto t0 = Clock::now();
+  if (options.wrinkle.texture_reference != "none")
+    FlattenByNeutral(options.wrinkle.texture_reference, textures->light, textures->coverage, &textures->gray);
+  cv::Mat coverage = detail_coverage.clone();
+  for (const auto& c : textures->coverage) cv::bitwise_and(coverage, c, coverage);
+  WrinkleMapBuilder builder(options.detail.map_resolution, coverage, ctx.rig.regions, options.wrinkle);
+  std::vector<cv::Mat> responses;
+  for (size_t t = 0; t < textures->gray.size(); ++t)
+    responses.push_back(builder.Add(textures->gray[t], textures->names[t]));
+  const WrinkleMap wmap = builder.Finish();
+  PatchLayoutReport layout_report;
+  const PatchLayout layout = PlacePatches(wmap, options.patch, &layout_report);
+  TrainingPatches pairs =
+      ExtractTrainingPatches(layout, textures->gray, responses, textures->displacement, options.wrinkle);
+  ctx.sum.timing.Add("wrinkle map + patches", Since(t0));
+  as->patch_locations = layout.num_patches();
+  as->training_pairs = pairs.size();
+  as->wrinkle_texels = cv::countNonZero(wmap.probability > 0);
+  ctx.Log(fmt::format("{}: wrinkle map over {} texels, {} patches placed, {} training pairs", actor,
+                      as->wrinkle_texels, layout.num_patches(), pairs.size()));
+  if (ctx.pictures()) {
+    WriteImage(ctx.report_dir / fmt::format("wrinkle_map_{}.png", actor),
+               DrawPatchLayout(wmap.probability, layout, wmap.valid), {.srgb = false});
+  }
+  return pairs;
+}
+
+// Secs. 4.1–4.2 for one actor: its scans read, the rig fitted, D^j and T^j for
+// every scan, then the wrinkle map and the training pairs; `as` filled.
+TrainingPatches ActorTrainingPairs(const ExtractionContext& ctx, const ScanActor& actor, Progress& progress,
+                                   ActorSummary* as) {
+  const int R = ctx.options.detail.map_resolution;
+  auto t0 = Clock::now();
+  const std::vector<int> order = NeutralFirst(actor);
+  std::vector<TriMesh> meshes;
+  std::vector<std::string> names;
+  ReadActorScans(actor, order, &meshes, &names);
+  as->scans = static_cast<int>(meshes.size());
+  ctx.sum.timing.Add("read scans", Since(t0), as->scans);
+  const RigFitResult fit = FitRigToActor(ctx, actor.name, &meshes, names);
+  as->correspondence = fit.correspondence;
+  as->fit_rms_mm = fit.rms_mm;
+
+  // Sec. 4.1: D^j and T^j for every scan.
+  t0 = Clock::now();
+  std::vector<MatX3d> others;
+  for (size_t j = 1; j < meshes.size(); ++j) others.push_back(meshes[j].V);
+  const DetailExtractor extractor(meshes[0], ctx.options.detail, names[0], others);
+  others.clear();
+  ctx.sum.timing.Add("G^HF, G, deformation transfer: set-up", Since(t0));
+  const UvRaster raster = RasterizeUv(meshes[0], R, R, names[0]);
+  const double mm_per_texel = MmPerTexel(meshes[0], R);
+  const ScanEntry& neutral_scan = actor.scans[actor.neutral];
+  const cv::Mat neutral_truth =
+      neutral_scan.truth_displacement.empty() ? cv::Mat() : ReadTruth(neutral_scan.truth_displacement, R);
+  ActorTextures textures;
+  for (size_t j = 0; j < meshes.size(); ++j) {
+    const ScanEntry& scan = actor.scans[order[j]];
+    const cv::Mat D =
+        ScanDisplacement(ctx, actor.name, scan, extractor, meshes[j].V, names[j], neutral_truth, mm_per_texel);
+    ExtractScanTextures(ctx, actor.name, scan, meshes[j], names[j], raster, D, &textures);
+    progress.Advance();
+  }
+  as->textures = static_cast<int>(textures.gray.size());
+  Require(!textures.gray.empty(), fmt::format("{}: no images under the selected lights ({})", actor.name,
+                                              fmt::join(ctx.lights, ", ")));
+  return ActorPatchPairs(ctx, actor.name, extractor.coverage(), &textures, as);
+}
+
+}  // namespace
+
 TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const TrainingOptions& options,
                                    const TrainingOutputs& outputs, TrainingSummary* summary,
                                    const std::function<void(const std::string&)>& log_fn) {
   options.Check();
   const auto start = Clock::now();
-  auto log = [&](const std::string& line) {
-    if (log_fn) log_fn(line);
-  };
   TrainingSummary local;
   TrainingSummary& sum = summary ? *summary : local;
   sum.actors.clear();
   sum.accuracy.clear();
-  const int R = options.detail.map_resolution;
   const std::vector<std::string> lights = SelectLights(set, options.training_lights);
-  const bool pictures = !outputs.report_dir.empty();
-  if (pictures) fs::create_directories(outputs.report_dir);
+  const ExtractionContext ctx{rig, options, lights, outputs.report_dir, sum, log_fn};
+  if (ctx.pictures()) fs::create_directories(outputs.report_dir);
   std::vector<ScanActor> actors = set.actors;
   if (options.max_actors > 0 && static_cast<int>(actors.size()) > options.max_actors) actors.resize(options.max_actors);
 
@@ -261,180 +525,10 @@ TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const
   for (const auto& a : actors) steps += static_cast<int64_t>(a.scans.size());
   Progress progress("training", steps);
   for (size_t a = 0; a < actors.size(); ++a) {
-    const ScanActor& actor = actors[a];
     ActorSummary as;
-    as.name = actor.name;
-    // --- Sec. 4.1: read the scans (neutral first).
-    auto t0 = Clock::now();
-    const std::vector<int> order = NeutralFirst(actor);
-    std::vector<TriMesh> meshes;
-    std::vector<std::string> names;
-    for (int s : order) {
-      meshes.push_back(ReadMesh(actor.scans[s].mesh));
-      names.push_back(actor.scans[s].mesh.string());
-      Require(meshes.back().F == meshes.front().F,
-              fmt::format("{}: its triangles differ from the neutral scan {} (an actor's scans must share one "
-                          "topology)",
-                          names.back(), names.front()));
-    }
-    as.scans = static_cast<int>(meshes.size());
-    sum.timing.Add("read scans", Since(t0), as.scans);
-    // --- Sec. 4.1: the rig fitted to all of the actor's scans.
-    t0 = Clock::now();
-    const RigFitResult fit = FitRigToScans(rig, meshes, names, options.fit);
-    sum.timing.Add("rig fit (Ceres)", Since(t0));
-    as.correspondence = fit.correspondence;
-    as.fit_rms_mm = fit.rms_mm;
-    log(fmt::format("{}: rig fit ({} correspondences) RMS {:.3f} mm, |identity| = {:.2f}", actor.name, fit.correspondence,
-                    fmt::join(fit.rms_mm, " / "), fit.identity.norm()));
-    if (fit.correspondence == "closest") {
-      // The rig's UV layout transferred from the fitted L^0 to M^0 (Sec. 4.1).
-      t0 = Clock::now();
-      std::vector<int> kept;
-      const TriMesh cut = TransferUvsFromRig(rig, fit.fitted[0], meshes[0], options.fit.max_correspondence_mm, &kept);
-      for (auto& m : meshes) {
-        TriMesh c = cut;
-        for (size_t i = 0; i < kept.size(); ++i) c.V.row(static_cast<int>(i)) = m.V.row(kept[i]);
-        m = std::move(c);
-      }
-      sum.timing.Add("UV transfer", Since(t0));
-      log(fmt::format("{}: UVs transferred from the fitted rig to {} of the scan's vertices", actor.name, kept.size()));
-    }
-    // --- Sec. 4.1: D^j for every scan.
-    t0 = Clock::now();
-    std::vector<MatX3d> others;
-    for (size_t j = 1; j < meshes.size(); ++j) others.push_back(meshes[j].V);
-    const DetailExtractor extractor(meshes[0], options.detail, names[0], others);
-    others.clear();
-    sum.timing.Add("G^HF, G, deformation transfer: set-up", Since(t0));
-    const UvRaster raster = RasterizeUv(meshes[0], R, R, names[0]);
-    const double mm_per_texel = MmPerTexel(meshes[0], R);
-    std::vector<cv::Mat> D(meshes.size());
-    const ScanEntry& neutral_scan = actor.scans[actor.neutral];
-    const cv::Mat neutral_truth =
-        neutral_scan.truth_displacement.empty() ? cv::Mat() : ReadTruth(neutral_scan.truth_displacement, R);
-    std::vector<cv::Mat> gray_textures, texture_displacements, texture_coverage;
-    std::vector<std::string> texture_names, texture_light;
-    for (size_t j = 0; j < meshes.size(); ++j) {
-      const ScanEntry& scan = actor.scans[order[j]];
-      t0 = Clock::now();
-      const ExtractedDetail detail = extractor.Extract(meshes[j].V, names[j]);
-      sum.timing.Add("detail extraction D^j", Since(t0));
-      sum.timing.Add("  G^HF (conjugate gradients)", detail.seconds_hf);
-      sum.timing.Add("  G + deformation transfer", detail.seconds_transfer);
-      sum.timing.Add("  M_0^j and normals", detail.seconds_aligned);
-      sum.timing.Add("  rays (Embree)", detail.seconds_rays);
-      D[j] = detail.displacement;
-      if (options.training_targets == "truth") {
-        Require(!scan.truth_displacement.empty() && !neutral_truth.empty(),
-                fmt::format("{}: training_targets = truth needs the scan set's ground truth (a studio scan set)",
-                            names[j]));
-        D[j] = ReadTruth(scan.truth_displacement, R) - neutral_truth;
-      }
-      if (!scan.truth_displacement.empty() && !neutral_truth.empty()) {
-        // D^j is relative to M_0^j, which carries the neutral's own detail (static
-        // lines), so its ground truth is the expression displacement minus the
-        // neutral's.
-        cv::Mat truth = ReadTruth(scan.truth_displacement, R) - neutral_truth;
-        cv::Mat mask;
-        cv::bitwise_and(extractor.coverage(), detail.valid, mask);
-        ScanAccuracy acc;
-        acc.actor = actor.name;
-        acc.scan = scan.name;
-        acc.face = CompareMaps(detail.displacement, truth, mask);
-        for (const auto& region : rig.regions) {
-          cv::Mat rm;
-          cv::bitwise_and(mask, ResizeMask(region.mask, R), rm);
-          acc.regions.emplace_back(region.name, CompareMaps(detail.displacement, truth, rm));
-        }
-        if (options.validation_band_mm > 0.0) {
-          const double sigma = options.validation_band_mm / mm_per_texel;
-          const cv::Mat db = WrinkleBand(detail.displacement, mask, sigma), tb = WrinkleBand(truth, mask, sigma);
-          acc.face_band = CompareMaps(db, tb, mask);
-          for (const auto& region : rig.regions) {
-            cv::Mat rm;
-            cv::bitwise_and(mask, ResizeMask(region.mask, R), rm);
-            acc.regions_band.emplace_back(region.name, CompareMaps(db, tb, rm));
-          }
-        }
-        log(fmt::format("{}/{}: D^j vs ground truth: RMSE {:.4f} mm (GT RMS {:.4f}), correlation {:.3f}; wrinkle band: "
-                        "RMSE {:.4f} mm (GT RMS {:.4f}), correlation {:.3f}",
-                        actor.name, scan.name, acc.face.rmse_mm, acc.face.reference_rms_mm, acc.face.correlation,
-                        acc.face_band.rmse_mm, acc.face_band.reference_rms_mm, acc.face_band.correlation));
-        if (pictures) {
-          double range = std::max(0.05, 3.0 * acc.face.reference_rms_mm);
-          cv::Mat both;
-          cv::hconcat(DisplacementPicture(detail.displacement, range, mask), DisplacementPicture(truth, range, mask), both);
-          WriteImage(outputs.report_dir / fmt::format("displacement_{}_{}.png", actor.name, scan.name), both,
-                     {.srgb = false});
-        }
-        sum.accuracy.push_back(std::move(acc));
-      } else if (pictures) {
-        WriteImage(outputs.report_dir / fmt::format("displacement_{}_{}.png", actor.name, scan.name),
-                   DisplacementPicture(detail.displacement, 0.3, detail.valid), {.srgb = false});
-      }
-      // The textures T^j: one per selected light rig, from that rig's images.
-      t0 = Clock::now();
-      const RayCaster caster(meshes[j], {}, names[j]);
-      for (const auto& light : lights) {
-        std::vector<Camera> cams;
-        std::vector<cv::Mat> images;
-        for (const auto& im : scan.images) {
-          if (im.light != light) continue;
-          cams.push_back(ReadCamera(im.camera));
-          images.push_back(ReadImage(im.image));
-          Require(images.back().channels() == 3 || images.back().channels() == 1,
-                  fmt::format("{}: expected an RGB or gray image", im.image.string()));
-        }
-        if (cams.empty()) continue;
-        const ExtractedTexture tex = ExtractTexture(meshes[j], raster, &caster, cams, images, options.texture);
-        gray_textures.push_back(tex.gray);
-        texture_light.push_back(light);
-        texture_coverage.push_back(tex.seen);
-        texture_displacements.push_back(D[j]);
-        texture_names.push_back(fmt::format("{}/{}/{}", actor.name, scan.name, light));
-        if (pictures && light == lights.front()) {
-          cv::Mat srgb = tex.color.clone();
-          for (int r = 0; r < srgb.rows; ++r) {
-            auto* p = srgb.ptr<float>(r);
-            for (int c = 0; c < srgb.cols * 3; ++c) p[c] = static_cast<float>(LinearToSrgb(std::clamp(p[c], 0.0f, 1.0f)));
-          }
-          cv::Mat out8;
-          srgb.convertTo(out8, CV_8UC3, 255.0);
-          WriteImage(outputs.report_dir / fmt::format("texture_{}_{}.png", actor.name, scan.name), out8, {.srgb = false});
-        }
-      }
-      sum.timing.Add("texture extraction T^j", Since(t0));
-      progress.Advance();
-    }
-    as.textures = static_cast<int>(gray_textures.size());
-    Require(!gray_textures.empty(), fmt::format("{}: no images under the selected lights ({})", actor.name,
-                                                fmt::join(lights, ", ")));
-    // --- Sec. 4.2: wrinkle map, patch layout, training pairs.
-    t0 = Clock::now();
-    if (options.wrinkle.texture_reference != "none")
-      FlattenByNeutral(options.wrinkle.texture_reference, texture_light, texture_coverage, &gray_textures);
-    cv::Mat coverage = extractor.coverage().clone();
-    for (const auto& c : texture_coverage) cv::bitwise_and(coverage, c, coverage);
-    WrinkleMapBuilder builder(R, coverage, rig.regions, options.wrinkle);
-    std::vector<cv::Mat> responses;
-    for (size_t t = 0; t < gray_textures.size(); ++t) responses.push_back(builder.Add(gray_textures[t], texture_names[t]));
-    const WrinkleMap wmap = builder.Finish();
-    PatchLayoutReport layout_report;
-    const PatchLayout layout = PlacePatches(wmap, options.patch, &layout_report);
-    TrainingPatches pairs =
-        ExtractTrainingPatches(layout, gray_textures, responses, texture_displacements, options.wrinkle);
-    sum.timing.Add("wrinkle map + patches", Since(t0));
-    as.patch_locations = layout.num_patches();
-    as.training_pairs = pairs.size();
-    as.wrinkle_texels = cv::countNonZero(wmap.probability > 0);
+    as.name = actors[a].name;
+    TrainingPatches pairs = ActorTrainingPairs(ctx, actors[a], progress, &as);
     total_pairs += pairs.size();
-    log(fmt::format("{}: wrinkle map over {} texels, {} patches placed, {} training pairs", actor.name,
-                    as.wrinkle_texels, layout.num_patches(), pairs.size()));
-    if (pictures) {
-      WriteImage(outputs.report_dir / fmt::format("wrinkle_map_{}.png", actor.name),
-                 DrawPatchLayout(wmap.probability, layout, wmap.valid), {.srgb = false});
-    }
     if (pairs.size() > 0) {
       actor_of_rows.insert(actor_of_rows.end(), static_cast<size_t>(pairs.size()), static_cast<int32_t>(a));
       texture_patches.push_back(std::move(pairs.texture));
@@ -447,6 +541,7 @@ TrainingPairs ExtractTrainingPairs(const ScanSet& set, const FaceRig& rig, const
                                         total_pairs, options.wrinkle.wrinkle_threshold,
                                         fmt::join(options.wrinkle.patch_regions, ", ")));
   sum.training_pairs = total_pairs;
+  // The pairs of all actors stacked, actor after actor.
   const int n = options.patch.patch_size * options.patch.patch_size;
   Eigen::MatrixXf T(total_pairs, n), Dp(total_pairs, n);
   int row = 0;
