@@ -212,7 +212,13 @@ struct CaptureEvalSummary {
   struct Landmarks {
     int frames = 0;
     double px = 0, iod = 0;
-    std::array<Eigen::Vector3d, kIbugGroups.size()> groups{};  // (error, dx, dy) per part
+    // (error, dx, dy) per part. Eigen's fixed-size vectors are not zeroed by `{}`
+    // (up to 0.4.3 eval.json's parts were whatever the memory held).
+    std::array<Eigen::Vector3d, kIbugGroups.size()> groups = [] {
+      std::array<Eigen::Vector3d, kIbugGroups.size()> zero;
+      zero.fill(Eigen::Vector3d::Zero());
+      return zero;
+    }();
   } landmarks;
   // The truth registered through the image (eval/registered_truth.h), pooled over
   // the active frames in the wrinkle regions: D^t against the registered D* (raw and

@@ -123,7 +123,10 @@ python3 - "$tmp/cap/eval.json" <<'PY' || { echo "FAIL: landmark errors of the gr
 import json, sys
 lm = json.load(open(sys.argv[1]))["landmarks"]
 print(f"ground-truth prior landmarks: {lm['px']:.3f} px over {lm['frames']} frames")
-sys.exit(0 if lm["frames"] >= 1 and lm["px"] < 0.5 and set(lm["parts"]) == {"jaw", "brows", "nose", "eyes", "mouth"} else 1)
+parts = lm["parts"]
+print("  by part: " + ", ".join(f"{k} {v['px']:.3f}" for k, v in parts.items()))
+ok_parts = set(parts) == {"jaw", "brows", "nose", "eyes", "mouth"} and all(0 <= v["px"] < 0.5 and abs(v["dx"]) < 0.5 and abs(v["dy"]) < 0.5 for v in parts.values())
+sys.exit(0 if lm["frames"] >= 1 and lm["px"] < 0.5 and ok_parts else 1)
 PY
 bad "prior and fit controls together" "exclude each other" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-prior --ground-truth-fit -o "$tmp/cap3"
 bad "capture missing model" "m3.cdm" "$crease" capture -i "$tmp/seq" --model "$tmp/m3.cdm" -o "$tmp/cap2"
