@@ -52,10 +52,7 @@ void RunCaptureCommand(CaptureArgs& a) {
   auto frames = OpenFrameSource(tf.input);
   const FrameSourceInfo& info = frames->info();
   const bool dataset = info.kind == "dataset";
-  if (tf.rig_path.empty()) {
-    Require(dataset, "--rig is required unless the input is a crease dataset");
-    tf.rig_path = DatasetTrackingRig(info.path);
-  }
+  tf.rig_path = TrackingRigPath(tf.rig_path, info);
   const CameraIntrinsics K = ResolveIntrinsics(tf.camera_path, info, tf.fov);
   const DetailModel model = ReadDetailModel(a.model_path);
   auto t0 = std::chrono::steady_clock::now();

@@ -49,10 +49,7 @@ void AddTrackCommand(CLI::App& app) {
     auto frames = OpenFrameSource(tf.input);
     const FrameSourceInfo& info = frames->info();
     const bool dataset = info.kind == "dataset";
-    if (tf.rig_path.empty()) {
-      Require(dataset, "--rig is required unless the input is a crease dataset");
-      tf.rig_path = DatasetTrackingRig(info.path);
-    }
+    tf.rig_path = TrackingRigPath(tf.rig_path, info);
     const FaceRig rig = ReadRig(tf.rig_path);
     const CameraIntrinsics K = ResolveIntrinsics(tf.camera_path, info, tf.fov);
     Require(!tf.gt_prior || dataset, "--ground-truth-prior needs a crease sequence dataset as input");

@@ -119,4 +119,10 @@ std::string DatasetTrackingRig(const std::filesystem::path& dataset) {
   return (dataset / "rig.crig").string();
 }
 
+std::string TrackingRigPath(const std::string& rig_flag, const FrameSourceInfo& info) {
+  if (!rig_flag.empty()) return rig_flag;
+  Require(info.kind == "dataset", "--rig is required unless the input is a crease dataset");
+  return DatasetTrackingRig(info.path);
+}
+
 }  // namespace crease::app

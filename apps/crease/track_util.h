@@ -75,4 +75,8 @@ class FrameTracker : public GlobalTracker {
 // else its rig.crig.
 std::string DatasetTrackingRig(const std::filesystem::path& dataset);
 
+// The rig to track with: `rig_flag` (--rig) when given, else the input dataset's
+// tracking rig (DatasetTrackingRig); an error when neither exists.
+std::string TrackingRigPath(const std::string& rig_flag, const FrameSourceInfo& info);
+
 }  // namespace crease::app
