@@ -143,4 +143,13 @@ FaceRig BuildIctStudioRig(const FaceRig& imported, const IctHeadOptions& options
   return rig;
 }
 
+void RequireDressedIfIct(const FaceRig& rig, const std::string& what) {
+  const bool undressed = rig.PartIndex("socket_left") >= 0 && rig.PartIndex("iris_left") >= 0 &&
+                         rig.PartIndex("pupil_left") < 0;
+  Require(!undressed, fmt::format("{} ({}): an imported ICT-FaceKit head not dressed for the studio (its cornea "
+                                  "caps would hide the irises and its lash cards render as black slabs); make "
+                                  "the studio rig with `crease synth rig --head ict --from THIS.crig -o STUDIO.crig`",
+                                  what, rig.source));
+}
+
 }  // namespace crease

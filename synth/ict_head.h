@@ -55,4 +55,10 @@ std::filesystem::path VendoredIctRigPath();
 // as described above. Throws Error naming a missing part.
 FaceRig BuildIctStudioRig(const FaceRig& imported, const IctHeadOptions& options = {});
 
+// Throws Error when `rig` is an ICT-FaceKit import that BuildIctStudioRig has not
+// dressed (it has eye sockets and irises but no pupils): rendered opaque, its
+// cornea caps hide the irises (blank white eyes) and its lash cards are black slabs
+// over the lids. `what` names the rig in the message, which says how to dress it.
+void RequireDressedIfIct(const FaceRig& rig, const std::string& what);
+
 }  // namespace crease

@@ -19,6 +19,7 @@
 #include "core/image_io.h"
 #include "core/mesh_ops.h"
 #include "core/mesh_primitives.h"
+#include "synth/ict_head.h"
 
 namespace crease {
 
@@ -372,6 +373,7 @@ Studio::~Studio() = default;
 Studio::Studio(const FaceRig& rig, const Actor& actor, const StudioOptions& options)
     : options_(options), scene_(std::make_unique<Scene>()) {
   options_.Check();
+  RequireDressedIfIct(rig, "studio rig");
   default_lights_ = LightRigFromSpec(options_.light);
   model_ = std::make_unique<ActorModel>(rig, actor);
   Scene& s = *scene_;

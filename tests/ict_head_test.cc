@@ -96,6 +96,9 @@ TEST(IctHead, StudioHeadHasOpaqueEyesAndNoLashCards) {
   FaceRig no_face = in;
   no_face.part_names[0] = "skin";
   EXPECT_ERROR_HAS(BuildIctStudioRig(no_face), "has no part 'face'");
+  // The studio refuses the undressed import (blank eyes, black lash slabs).
+  EXPECT_ERROR_HAS(RequireDressedIfIct(in, "rig"), "not dressed for the studio");
+  EXPECT_NO_THROW(RequireDressedIfIct(rig, "rig"));
 }
 
 // Issue 15's realism bounds on a small set: dlib finds every face under front and
