@@ -25,36 +25,66 @@ namespace crease {
 
 namespace {
 
-// "directional:AZ:EL[:AMBIENT]" → DirectionalRig(AZ, EL) with its ambient set; nullopt
-// when `spec` does not start with "directional:".
-std::optional<LightRig> DirectionalRigFromSpec(const std::string& spec) {
-  constexpr std::string_view kPrefix = "directional:";
-  if (spec.rfind(kPrefix, 0) != 0) return std::nullopt;
+// The numbers of a light spec "PREFIX:A:B[:…]" (`usage` names the expected form);
+// nullopt when `spec` does not start with `prefix`.
+std::optional<std::vector<double>> LightSpecNumbers(const std::string& spec, std::string_view prefix,
+                                                    std::string_view usage, size_t min_count, size_t max_count) {
+  if (spec.rfind(prefix, 0) != 0) return std::nullopt;
   std::vector<double> values;
-  std::stringstream ss(spec.substr(kPrefix.size()));
+  std::stringstream ss(spec.substr(prefix.size()));
   for (std::string item; std::getline(ss, item, ':');) {
     char* end = nullptr;
     const double v = std::strtod(item.c_str(), &end);
     Require(!item.empty() && end == item.c_str() + item.size() && std::isfinite(v),
-            fmt::format("light '{}': '{}' is not a number (expected directional:AZIMUTH:ELEVATION[:AMBIENT])",
-                        spec, item));
+            fmt::format("light '{}': '{}' is not a number (expected {})", spec, item, usage));
     values.push_back(v);
   }
-  Require(values.size() == 2 || values.size() == 3,
-          fmt::format("light '{}': expected directional:AZIMUTH:ELEVATION[:AMBIENT] in degrees", spec));
-  LightRig rig = DirectionalRig(values[0], values[1]);
-  if (values.size() == 3) {
-    Require(values[2] >= 0.0, fmt::format("light '{}': ambient {} must be >= 0", spec, values[2]));
-    std::get<AmbientOcclusionLight>(rig.lights[1]).color = Eigen::Vector3d::Constant(values[2]);
+  Require(values.size() >= min_count && values.size() <= max_count,
+          fmt::format("light '{}': expected {} in degrees", spec, usage));
+  return values;
+}
+
+// Sets the ambient of a one-light rig from a spec's optional last number.
+void SetSpecAmbient(const std::string& spec, const std::vector<double>& values, size_t index, LightRig* rig) {
+  if (values.size() <= index) return;
+  Require(values[index] >= 0.0, fmt::format("light '{}': ambient {} must be >= 0", spec, values[index]));
+  std::get<AmbientOcclusionLight>(rig->lights[1]).color = Eigen::Vector3d::Constant(values[index]);
+}
+
+// "directional:AZ:EL[:AMBIENT]" → DirectionalRig(AZ, EL) with its ambient set;
+// "sphere:AZ:EL:DIAMETER[:AMBIENT]" → the same light from a sphere (a lamp or softbox)
+// seen DIAMETER degrees wide, as bright on a surface facing it: its shadows have a
+// penumbra. nullopt for any other spec.
+std::optional<LightRig> OneLightRigFromSpec(const std::string& spec) {
+  if (auto v = LightSpecNumbers(spec, "directional:", "directional:AZIMUTH:ELEVATION[:AMBIENT]", 2, 3)) {
+    LightRig rig = DirectionalRig((*v)[0], (*v)[1]);
+    SetSpecAmbient(spec, *v, 2, &rig);
+    rig.name = spec;
+    return rig;
   }
-  rig.name = spec;
-  return rig;
+  if (auto v = LightSpecNumbers(spec, "sphere:", "sphere:AZIMUTH:ELEVATION:DIAMETER[:AMBIENT]", 3, 4)) {
+    const double diameter = (*v)[2];
+    Require(diameter > 0.0 && diameter < 120.0,
+            fmt::format("light '{}': diameter {} must be in (0, 120) degrees", spec, diameter));
+    LightRig rig = DirectionalRig((*v)[0], (*v)[1]);
+    SphereLight sphere;
+    const double distance = 1500.0;
+    sphere.centre = distance * std::get<DirectionalLight>(rig.lights[0]).direction;
+    sphere.radius = distance * std::sin(0.5 * diameter * std::numbers::pi / 180.0);
+    sphere.color = std::get<DirectionalLight>(rig.lights[0]).color;
+    sphere.samples = 16;
+    rig.lights[0] = sphere;
+    SetSpecAmbient(spec, *v, 3, &rig);
+    rig.name = spec;
+    return rig;
+  }
+  return std::nullopt;
 }
 
 }  // namespace
 
 LightRig LightRigFromSpec(const std::string& spec) {
-  if (auto rig = DirectionalRigFromSpec(spec)) return *rig;
+  if (auto rig = OneLightRigFromSpec(spec)) return *rig;
   const std::string ext = LowerExtension(spec);
   if (ext != ".exr" && ext != ".hdr") return MakeLightRig(spec);
   LightRig rig;

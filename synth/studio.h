@@ -41,8 +41,9 @@ namespace crease {
 // A light rig by name (a preset of synth/lights.h: front, raking-above, raking-side,
 // studio, ceiling, studio-env, overcast, window), "directional:AZ:EL[:AMBIENT]" (one
 // camera-attached directional light at azimuth/elevation in degrees, DirectionalRig,
-// with ambient occlusion AMBIENT, default 0.05: for sweeps of the light direction) or
-// a lat-long environment map file (.exr, .hdr: linear radiance, importance sampled).
+// with ambient occlusion AMBIENT, default 0.05: for sweeps of the light direction),
+// "sphere:AZ:EL:DIAMETER[:AMBIENT]" (the same light from a sphere DIAMETER degrees
+// wide, e.g. a lamp or softbox, whose shadows have a penumbra) or a lat-long environment map file (.exr, .hdr: linear radiance, importance sampled).
 // Errors name the preset or the file.
 LightRig LightRigFromSpec(const std::string& spec);
 

@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <numbers>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
@@ -52,6 +53,16 @@ TEST(Studio, DirectionalLightSpecSweepsTheLightDirection) {
             std::string::npos);
   EXPECT_NE(ErrorOf([] { LightRigFromSpec("directional:80:x"); }).find("'x' is not a number"), std::string::npos);
   EXPECT_NE(ErrorOf([] { LightRigFromSpec("directional:80:5:-1"); }).find("ambient -1"), std::string::npos);
+  // A sphere light in the same direction, 10° wide, as bright on a surface facing it.
+  const LightRig soft = LightRigFromSpec("sphere:80:5:10:0.1");
+  const auto& s = std::get<SphereLight>(soft.lights[0]);
+  EXPECT_LT((s.centre.normalized() - RigDirection(80.0, 5.0)).norm(), 1e-12);
+  EXPECT_NEAR(2.0 * std::asin(s.radius / s.centre.norm()) * 180.0 / std::numbers::pi, 10.0, 1e-9);
+  EXPECT_DOUBLE_EQ(s.color.x(), d.color.x());
+  EXPECT_DOUBLE_EQ(std::get<AmbientOcclusionLight>(soft.lights[1]).color.x(), 0.1);
+  EXPECT_NE(ErrorOf([] { LightRigFromSpec("sphere:80:5"); }).find("sphere:AZIMUTH:ELEVATION:DIAMETER"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] { LightRigFromSpec("sphere:80:5:0"); }).find("diameter 0"), std::string::npos);
 }
 
 TEST(Studio, GroundTruthProjectionsLandOnTheRenderedFace) {

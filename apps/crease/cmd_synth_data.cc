@@ -29,7 +29,7 @@ namespace {
 std::string LightChoices() {
   std::string names;
   for (const auto& n : LightRigNames()) names += (names.empty() ? "" : ", ") + n;
-  return names + ", directional:AZ:EL[:AMBIENT] (degrees), or an environment map (.exr, .hdr)";
+  return names + ", directional:AZ:EL[:AMBIENT], sphere:AZ:EL:DIAMETER[:AMBIENT] (degrees), or an environment map (.exr, .hdr)";
 }
 
 void ParseSize(const std::string& size, StudioOptions* studio) {
