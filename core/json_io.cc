@@ -24,6 +24,8 @@ nlohmann::json ReadJsonFile(const std::filesystem::path& path) {
       }
     }
     throw Error(fmt::format("{}:{}:{}: malformed JSON ({})", path.string(), line, col, e.what()));
+  } catch (const nlohmann::json::exception& e) {  // e.g. a number out of range (1e400)
+    throw Error(fmt::format("{}: unreadable JSON ({})", path.string(), e.what()));
   }
 }
 

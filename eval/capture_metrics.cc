@@ -16,6 +16,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/camera.h"
+#include "core/dataset_info.h"
 #include "core/error.h"
 #include "core/face_rig.h"
 #include "core/file_util.h"
@@ -243,18 +244,6 @@ cv::Mat DrawErrorVectors(const cv::Mat& frame_rgb, const MatX2d& truth, const Ma
                     fmt::format("global tracker: {:.2f} px\n(vectors x{:g})", coarse_px, scale)),
               panel(err_refined, cv::Scalar(80, 255, 120), fmt::format("flow-refined: {:.2f} px", refined_px)), out);
   return out;
-}
-
-fs::path TruthMapPath(const fs::path& dataset, const json& info, int frame) {
-  std::string pattern = "maps/{frame:06d}_expression_displacement.exr";
-  if (info.contains("files") && info["files"].contains("expression_displacement")) {
-    const std::string p = info["files"]["expression_displacement"].get<std::string>();
-    Require(!p.empty(), fmt::format("{}: the dataset has no per-frame displacement maps (rendered with --no-maps); "
-                                    "render it again without --no-maps to evaluate D^t",
-                                    (dataset / "dataset.json").string()));
-    pattern = p;
-  }
-  return dataset / fmt::format(fmt::runtime(pattern), fmt::arg("frame", frame));
 }
 
 // The prior error of a tracking rig: the best fit of its linear model to a true
@@ -494,7 +483,7 @@ class AppearanceProbe {
   // expression of every frame and the textures of the reference frames.
   AppearanceProbe(const fs::path& capture, const fs::path& dataset, const json& capture_json, const FaceRig& rig,
                   const FaceRig& truth_rig, const CameraIntrinsics& K, const std::vector<int>& frames,
-                  const std::function<fs::path(int)>& frame_path, const json& info, const cv::Mat& mask,
+                  const std::function<fs::path(int)>& frame_path, const SequenceDatasetInfo& info, const cv::Mat& mask,
                   const AppearanceCeilingOptions& options)
       : capture_(capture), frame_path_(frame_path) {
     extractor_ = std::make_unique<FrameTextureExtractor>(
@@ -502,7 +491,7 @@ class AppearanceProbe {
     // The reference: the tracked frames with the smallest true |β|.
     std::vector<std::pair<double, int>> by_expression;
     for (int index : frames) {
-      const Eigen::VectorXd beta = ReadTruthExpression(truth_rig, dataset / "truth" / fmt::format("{:06d}.json", index));
+      const Eigen::VectorXd beta = ReadTruthExpression(truth_rig, info.TruthPath(index));
       by_expression.emplace_back(beta.norm(), index);
     }
     std::sort(by_expression.begin(), by_expression.end());
@@ -519,7 +508,7 @@ class AppearanceProbe {
     if (textures.empty()) return;
     meter_.emplace(MedianTexture(textures, seen), mask, 2, options);
     // The layer of the most neutral frame: its static lines, which T_ref holds too.
-    reference_layer_ = ReadMap(TruthMapPath(dataset, info, reference_frame_), mask.rows, /*resample=*/true);
+    reference_layer_ = ReadMap(info.DisplacementPath(reference_frame_), mask.rows, /*resample=*/true);
   }
   // Frame `index` (its capture arrays) with its truth D* (`detail`) and wrinkle layer.
   void Add(int index, const CaptureFrameArrays& arrays, const cv::Mat& detail, const cv::Mat& layer) {
@@ -612,9 +601,7 @@ struct CaptureEvalContext {
   CaptureEvalContext& operator=(const CaptureEvalContext&) = delete;
 
   // The dataset's image of frame `index`.
-  fs::path FramePath(int index) const {
-    return dataset / fmt::format(fmt::runtime(frame_pattern), fmt::arg("frame", index));
-  }
+  fs::path FramePath(int index) const { return info.FramePath(index); }
   // The fraction of the face-chart vertices visible in the ground truth (`vertex_visible`: #V).
   double VisibleFraction(const std::vector<char>& vertex_visible) const {
     int seen = 0;
@@ -624,8 +611,8 @@ struct CaptureEvalContext {
 
   fs::path capture, dataset;
   const CaptureEvalOptions& options;
-  json cap, info;          // capture.json, dataset.json
-  std::string frame_pattern;  // dataset.json's files.frame, checked (DatasetFramePattern)
+  json cap;                  // capture.json
+  SequenceDatasetInfo info;  // dataset.json
   FaceRig truth_rig, rig;  // the dataset's rig; the compatible rig capture used
   // A capture with another rig than the dataset's is measured through a surface
   // correspondence; D^t, in the other rig's UV layout, is then not compared.
@@ -681,13 +668,9 @@ void CaptureEvalContext::ReadInputs() {
   const fs::path capture_json = capture / "capture.json";
   Require(fs::is_regular_file(capture_json),
           fmt::format("{}: missing; is {} a `crease capture` folder?", capture_json.string(), capture.string()));
-  const fs::path dataset_json = dataset / "dataset.json";
-  Require(fs::is_regular_file(dataset_json),
-          fmt::format("{}: missing; is {} a `crease synth sequence` dataset?", dataset_json.string(), dataset.string()));
+  info = ReadSequenceDatasetInfo(dataset);
   cap = ReadJsonFile(capture_json);
-  info = ReadJsonFile(dataset_json);
-  frame_pattern = DatasetFramePattern(info, dataset_json);
-  truth_rig = ReadRig(dataset / "rig.crig");
+  truth_rig = ReadRig(info.RigPath());
   rig = ReadRig(capture / "rig.crig");
   corr = CorrespondRigs(rig, truth_rig);
   K = ReadCamera(dataset / "camera.json").intrinsics;
@@ -1101,7 +1084,7 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
   const fs::path d_path = c.capture / "displacement" / fmt::format("{:06d}.exr", index);
   if (!c.corr.same_uv || !fs::is_regular_file(d_path)) return d;
   d.D = ReadMap(d_path, c.R);
-  const cv::Mat layer = ReadMap(TruthMapPath(c.dataset, c.info, index), c.R, /*resample=*/true);
+  const cv::Mat layer = ReadMap(c.info.DisplacementPath(index), c.R, /*resample=*/true);
   const cv::Mat G = c.detail_truth ? ResampleSquareMap(c.detail_truth->Detail(beta), c.R) : layer;
   if (!c.options.truth_maps_dir.empty()) {
     WriteImage(fs::path(c.options.truth_maps_dir) / fmt::format("{:06d}.exr", index), G);

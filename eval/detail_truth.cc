@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 
+#include "core/dataset_info.h"
 #include "core/error.h"
 #include "core/image_io.h"
 #include "core/json_io.h"
@@ -150,20 +151,16 @@ std::string ExtractionTruthReport::ToJson() const {
 int WriteDetailTruthMaps(const std::filesystem::path& dataset, const DetailExtractionOptions& detail, int frames,
                          const std::filesystem::path& out) {
   namespace fs = std::filesystem;
-  const fs::path dataset_json = dataset / "dataset.json";
-  Require(fs::is_regular_file(dataset_json),
-          fmt::format("{}: missing; is {} a `crease synth sequence` dataset?", dataset_json.string(), dataset.string()));
-  const nlohmann::json info = ReadJsonFile(dataset_json);
-  const int first = info.value("first_frame", 0), count = info.value("frames", 0);
-  Require(count > 0, fmt::format("{}: no frames", dataset_json.string()));
-  const int n = frames < 0 ? count : std::min(frames, count);
-  const FaceRig rig = ReadRig(dataset / "rig.crig");
+  const SequenceDatasetInfo info = ReadSequenceDatasetInfo(dataset);
+  const int first = info.first_frame;
+  const int n = frames < 0 ? info.frames : std::min(frames, info.frames);
+  const FaceRig rig = ReadRig(info.RigPath());
   const DetailTruth truth(rig, ReadActor(dataset / "actor.json"), detail);
   const fs::path tmp = out.parent_path() / fmt::format(".{}.tmp-{}", out.filename().string(), ::getpid());
   fs::remove_all(tmp);
   fs::create_directories(tmp);
   for (int i = first; i < first + n; ++i) {
-    const Eigen::VectorXd beta = ReadTruthExpression(rig, dataset / "truth" / fmt::format("{:06d}.json", i));
+    const Eigen::VectorXd beta = ReadTruthExpression(rig, info.TruthPath(i));
     WriteImage(tmp / fmt::format("{:06d}.exr", i), ResampleSquareMap(truth.Detail(beta), detail.map_resolution));
   }
   fs::remove_all(out);

@@ -193,8 +193,8 @@ DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const
     for (const auto& e : studio.timing().Entries()) timing.Add("  " + e.name, e.total_seconds, e.count);
     report.timing = timing.ToTable();
     json ds;
-    ds["format"] = "crease synthetic sequence";
-    ds["version"] = 1;
+    ds["format"] = SequenceDatasetInfo::kFormat;
+    ds["version"] = SequenceDatasetInfo::kVersion;
     ds["sequence"] = sequence.name;
     ds["first_frame"] = first;
     ds["frames"] = count;
@@ -325,60 +325,14 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
   return report;
 }
 
-namespace {
-// The widest a frame pattern may pad {frame}: frame numbers have at most 10 digits.
-constexpr int kMaxFrameFieldWidth = 32;
-
-// Checks the replacement fields of a files.frame pattern: {frame} or {frame:SPEC},
-// no number in SPEC (the width) above kMaxFrameFieldWidth. `where` names the key.
-void CheckFrameFields(const std::string& pattern, const std::string& where) {
-  for (size_t open = pattern.find('{'); open != std::string::npos; open = pattern.find('{', open)) {
-    if (pattern.compare(open, 2, "{{") == 0) {  // an escaped brace
-      open += 2;
-      continue;
-    }
-    const size_t close = pattern.find('}', open);
-    Require(close != std::string::npos, fmt::format("{} = \"{}\": a '{{' is not closed", where, pattern));
-    const std::string field = pattern.substr(open + 1, close - open - 1);
-    const size_t colon = field.find(':');
-    Require(field.substr(0, colon) == "frame",
-            fmt::format("{} = \"{}\": the only field is {{frame}}, not {{{}}}", where, pattern, field));
-    int number = 0;
-    for (char c : colon == std::string::npos ? std::string() : field.substr(colon + 1)) {
-      number = std::isdigit(static_cast<unsigned char>(c)) ? number * 10 + (c - '0') : 0;
-      Require(number <= kMaxFrameFieldWidth, fmt::format("{} = \"{}\": {{{}}} pads wider than {} characters",
-                                                         where, pattern, field, kMaxFrameFieldWidth));
-    }
-    open = close + 1;
-  }
-}
-}  // namespace
-
-std::string DatasetFramePattern(const json& info, const fs::path& dataset_json) {
-  if (!info.contains("files") || !info.at("files").contains("frame")) return "frames/{frame:06d}.png";
-  const std::string where = fmt::format("{}: files.frame", dataset_json.string());
-  const json& value = info.at("files").at("frame");
-  Require(value.is_string(), fmt::format("{} must be a string such as \"frames/{{frame:06d}}.png\"", where));
-  const std::string pattern = value.get<std::string>();
-  CheckFrameFields(pattern, where);
-  try {
-    (void)fmt::format(fmt::runtime(pattern), fmt::arg("frame", 0));
-  } catch (const fmt::format_error& e) {
-    throw Error(fmt::format("{} = \"{}\" is not a valid pattern: {}", where, pattern, e.what()));
-  }
-  return pattern;
-}
-
 TriMesh RebuildDatasetFrameMesh(const fs::path& dataset, int frame) {
-  const json ds = ReadJsonFile(dataset / "dataset.json");
-  Require(ds.value("format", "") == "crease synthetic sequence",
-          fmt::format("{}: not a crease sequence dataset", (dataset / "dataset.json").string()));
-  const FaceRig rig = ReadRig(dataset / "rig.crig");
+  const SequenceDatasetInfo info = ReadSequenceDatasetInfo(dataset);
+  const FaceRig rig = ReadRig(info.RigPath());
   const Actor actor = ReadActor(dataset / "actor.json");
-  const fs::path truth_path = dataset / "truth" / (FrameName(frame) + ".json");
-  Require(fs::exists(truth_path), fmt::format("{}: frame {} is not in this dataset (frames {}..{})", truth_path.string(),
-                                              frame, ds.value("first_frame", 0),
-                                              ds.value("first_frame", 0) + ds.value("frames", 0) - 1));
+  const fs::path truth_path = info.TruthPath(frame);
+  Require(info.HasFrame(frame) && fs::exists(truth_path),
+          fmt::format("{}: frame {} is not in this dataset (frames {}..{})", truth_path.string(), frame,
+                      info.first_frame, info.last_frame()));
   const json truth = ReadJsonFile(truth_path);
   Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.num_expressions());
   for (auto it = truth.at("expression").begin(); it != truth.at("expression").end(); ++it) {

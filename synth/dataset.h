@@ -43,6 +43,7 @@
 #include <vector>
 #include <nlohmann/json_fwd.hpp>
 
+#include "core/dataset_info.h"  // dataset.json's reader
 #include "core/face_rig.h"
 #include "core/tri_mesh.h"
 #include "synth/actor.h"
@@ -109,13 +110,6 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
 // Rebuilds the full high-resolution ground-truth surface of frame `frame` of a
 // sequence dataset (head frame, mm). Errors name the file that is missing or wrong.
 TriMesh RebuildDatasetFrameMesh(const std::filesystem::path& dataset, int frame);
-
-// The frame file pattern of a sequence dataset whose dataset.json (at `dataset_json`)
-// is `info`: files.frame, a fmt pattern whose one field is {frame} (default
-// "frames/{frame:06d}.png"). Throws Error naming dataset.json and the key when it is
-// not a string, names another field, is malformed, or pads wider than 32 characters
-// (a width of 999999999 made eval take 6.2 GB, issue 19).
-std::string DatasetFramePattern(const nlohmann::json& info, const std::filesystem::path& dataset_json);
 
 // "name=w,name=w" → expression weights for the rig (names resolve like sequences: a
 // name without _L/_R drives both sides).

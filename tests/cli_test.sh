@@ -162,6 +162,9 @@ ds = json.load(open(f"{d}/seq/dataset.json"))
 ds["files"]["frame"] = "frames/{frame:999999999d}.png"
 import os; os.makedirs(f"{d}/seqpat", exist_ok=True)
 put("seqpat/dataset.json", json.dumps(ds).encode())
+for name, key, value in (("seqv99", "version", 99), ("seqneg", "width", -640)):
+    bad = json.load(open(f"{d}/seq/dataset.json")); bad[key] = value
+    os.makedirs(f"{d}/{name}", exist_ok=True); put(f"{name}/dataset.json", json.dumps(bad).encode())
 PY
 bad "vtp NumberOfPoints=-1" 'neg.vtp: not a readable VTK XML PolyData file: Piece NumberOfPoints="-1"' "$crease" mesh info "$tmp/neg.vtp"
 bad "vtp NumberOfPolys 2e9" "polys.vtp: not a readable VTK XML PolyData file: array 'offsets' holds" "$crease" mesh convert "$tmp/polys.vtp" "$tmp/x.ply"
@@ -175,6 +178,8 @@ bad "rig info device" "/dev/zero: is not a regular file" "$crease" rig info /dev
 bad "model info device" "/dev/zero: is not a regular file" "$crease" model info /dev/zero
 bad "PNG claiming 100000x100000" "huge.png: the header claims 100000x100000 pixels" "$crease" synth render-scan --mesh "$tmp/e.obj" --albedo "$tmp/huge.png" --units mm --size 160x120 --samples 1 -o "$tmp/x.png"
 bad "eval frame pattern width" "seqpat/dataset.json: files.frame" "$crease" eval --capture "$tmp/cap" --dataset "$tmp/seqpat"
+bad "dataset version 99" "seqv99/dataset.json: version 99 is not supported" "$crease" eval --capture "$tmp/cap" --dataset "$tmp/seqv99"
+bad "dataset negative width" "seqneg/dataset.json: width = -640 is outside" "$crease" track -i "$tmp/seqneg" -o "$tmp/t_neg"
 [ ! -e "$tmp/x.png" ] && [ ! -e "$tmp/x.ply" ] || { echo "FAIL: output written despite an error"; fails=$((fails+1)); }
 
 bad "missing mesh" "nope.ply: file does not exist" "$crease" mesh info "$tmp/nope.ply"

@@ -144,24 +144,6 @@ TEST(Studio, SequenceDatasetIsCompleteDeterministicAndRebuildable) {
   EXPECT_NE(lr.warnings[0].find("browOuterUp"), std::string::npos);
 }
 
-// Issue 19: files.frame "{frame:999999999d}" made eval take 6.2 GB; a frame pattern
-// is checked when dataset.json is read, naming the file and the key.
-TEST(Studio, DatasetFramePatternIsChecked) {
-  const fs::path file = "ds/dataset.json";
-  auto pattern = [&](const nlohmann::json& frame) {
-    return DatasetFramePattern({{"files", {{"frame", frame}}}}, file);
-  };
-  EXPECT_EQ(DatasetFramePattern(nlohmann::json::object(), file), "frames/{frame:06d}.png");
-  EXPECT_EQ(pattern("img/{frame:04d}.png"), "img/{frame:04d}.png");
-  EXPECT_EQ(pattern("{{x}}/{frame}.png"), "{{x}}/{frame}.png");
-  EXPECT_ERROR_HAS(pattern("frames/{frame:999999999d}.png"), "ds/dataset.json: files.frame = ");
-  EXPECT_ERROR_HAS(pattern("frames/{frame:999999999d}.png"), "pads wider than 32 characters");
-  EXPECT_ERROR_HAS(pattern("frames/{index:06d}.png"), "the only field is {frame}, not {index:06d}");
-  EXPECT_ERROR_HAS(pattern("frames/{frame:06q}.png"), "is not a valid pattern");
-  EXPECT_ERROR_HAS(pattern("frames/{frame"), "is not closed");
-  EXPECT_ERROR_HAS(pattern(7), "ds/dataset.json: files.frame must be a string");
-}
-
 TEST(Studio, ScanSetHasMeshesCalibratedImagesAndMaps) {
   const fs::path dir = TestDir();
   // An environment map from a file works as a light rig wherever a preset does.

@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "core/dataset_info.h"
 #include "core/error.h"
 #include "core/json_io.h"
 #include "eval/rig_correspondence.h"
@@ -109,14 +110,7 @@ Eigen::VectorXd FrameTracker::identity() const {
 std::string FrameTracker::source_name() const { return source_; }
 
 std::string DatasetTrackingRig(const std::filesystem::path& dataset) {
-  const std::filesystem::path json_path = dataset / "dataset.json";
-  if (std::filesystem::is_regular_file(json_path)) {
-    const nlohmann::json j = ReadJsonFile(json_path);
-    if (j.is_object() && j.contains("tracking_rig") && j["tracking_rig"].is_string()) {
-      return (dataset / j["tracking_rig"].get<std::string>()).string();
-    }
-  }
-  return (dataset / "rig.crig").string();
+  return ReadSequenceDatasetInfo(dataset).TrackingRigPath().string();
 }
 
 std::string TrackingRigPath(const std::string& rig_flag, const FrameSourceInfo& info) {

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "core/color.h"
+#include "core/dataset_info.h"
 #include "core/error.h"
 #include "core/file_util.h"
 #include "core/image_io.h"
@@ -143,13 +144,13 @@ class ImageFolderSource final : public FrameSource {
 std::unique_ptr<FrameSource> OpenFrameSource(const fs::path& path) {
   Require(fs::exists(path), fmt::format("{}: does not exist", path.string()));
   if (fs::is_directory(path)) {
-    if (fs::is_regular_file(path / "dataset.json")) {
+    if (IsSequenceDataset(path)) {
       // A crease sequence dataset: its frames and its camera.
-      const nlohmann::json ds = ReadJsonFile(path / "dataset.json");
+      const SequenceDatasetInfo ds = ReadSequenceDatasetInfo(path);
       auto source = std::make_unique<ImageFolderSource>(path / "frames", "dataset");
       FrameSourceInfo& info = source->mutable_info();
       info.path = path;
-      info.fps = ds.value("fps", 30.0);
+      info.fps = ds.fps;
       if (fs::is_regular_file(path / "camera.json")) info.camera = ReadCamera(path / "camera.json");
       return source;
     }
