@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <vector>
 #include <fmt/format.h>
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 #include <opencv2/core.hpp>
 
@@ -21,6 +23,21 @@ constexpr int64_t kMaxImagePixels = 100'000'000;
 
 bool IsFloatFormat(const std::string& ext) {
   return ext == ".exr" || ext == ".hdr" || ext == ".pfm";
+}
+
+// Encodes `data` (CV_32F, continuous) as `spec` with `out`, opened as `name`; errors
+// name `path`.
+void Encode(OIIO::ImageOutput& out, const std::string& name, const OIIO::ImageSpec& spec, const cv::Mat& data,
+            const fs::path& path) {
+  if (!out.open(name, spec)) {
+    throw Error(fmt::format("{}: cannot open for writing: {}", path.string(), out.geterror()));
+  }
+  if (!out.write_image(OIIO::TypeDesc::FLOAT, data.data)) {
+    throw Error(fmt::format("{}: write failed: {}", path.string(), out.geterror()));
+  }
+  if (!out.close()) {
+    throw Error(fmt::format("{}: write failed: {}", path.string(), out.geterror()));
+  }
 }
 }  // namespace
 
@@ -91,29 +108,30 @@ void WriteImage(const fs::path& path, const cv::Mat& image, const ImageWriteOpti
       }
     }
   }
-  WriteFileAtomicVia(path, [&](const fs::path& tmp) {
-    auto out = OIIO::ImageOutput::create(path.string());
-    if (!out) {
-      throw Error(fmt::format("{}: no image writer for extension '{}': {}", path.string(), ext,
-                              OIIO::geterror()));
-    }
-    OIIO::ImageSpec spec(data.cols, data.rows, c, format);
-    // A fixed date: OpenEXR writers stamp the current time otherwise, and the same
-    // inputs must give the same bytes (determinism, DESIGN.md).
-    spec.attribute("DateTime", "1970:01:01 00:00:00");
-    if (format == OIIO::TypeDesc::UINT8 || format == OIIO::TypeDesc::UINT16) {
-      spec.attribute("oiio:ColorSpace", options.srgb ? "sRGB" : "Linear");
-    }
-    if (!out->open(tmp.string(), spec)) {
-      throw Error(fmt::format("{}: cannot open for writing: {}", path.string(), out->geterror()));
-    }
-    if (!out->write_image(OIIO::TypeDesc::FLOAT, data.data)) {
-      throw Error(fmt::format("{}: write failed: {}", path.string(), out->geterror()));
-    }
-    if (!out->close()) {
-      throw Error(fmt::format("{}: write failed: {}", path.string(), out->geterror()));
-    }
-  });
+  auto out = OIIO::ImageOutput::create(path.string());
+  if (!out) {
+    throw Error(fmt::format("{}: no image writer for extension '{}': {}", path.string(), ext, OIIO::geterror()));
+  }
+  OIIO::ImageSpec spec(data.cols, data.rows, c, format);
+  // A fixed date: OpenEXR writers stamp the current time otherwise, and the same
+  // inputs must give the same bytes (determinism, DESIGN.md).
+  spec.attribute("DateTime", "1970:01:01 00:00:00");
+  if (format == OIIO::TypeDesc::UINT8 || format == OIIO::TypeDesc::UINT16) {
+    spec.attribute("oiio:ColorSpace", options.srgb ? "sRGB" : "Linear");
+  }
+  if (out->supports("ioproxy")) {
+    // Encoded in memory, then written through a checked stream: OIIO's PNG writer
+    // does not report a full disk (a truncated PNG was reported as written, issue 19).
+    std::vector<unsigned char> bytes;
+    OIIO::Filesystem::IOVecOutput memory(bytes);
+    Require(out->set_ioproxy(&memory), fmt::format("{}: cannot encode in memory: {}", path.string(), out->geterror()));
+    Encode(*out, path.string(), spec, data, path);
+    WriteFileAtomic(path, [&](std::ostream& file) {
+      file.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+    });
+  } else {
+    WriteFileAtomicVia(path, [&](const fs::path& tmp) { Encode(*out, tmp.string(), spec, data, path); });
+  }
 }
 
 }  // namespace crease

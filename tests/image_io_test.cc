@@ -6,6 +6,8 @@
 #include <chrono>
 #include <fstream>
 #include <thread>
+#include <csignal>
+#include <sys/resource.h>
 #include <opencv2/core.hpp>
 
 #include "core/error.h"
@@ -113,6 +115,40 @@ TEST(ImageIo, ExrPngRoundTripsSrgbAndErrors) {
   for (const auto& e : fs::directory_iterator(dir)) {
     EXPECT_EQ(e.path().filename().string().find(".tmp-"), std::string::npos) << e.path();
   }
+}
+
+// Issue 19: onto a full disk, `synth render -o r.png` exited 0 and left a truncated
+// PNG (OIIO's PNG writer does not report the failed write). A file size limit
+// (RLIMIT_FSIZE, each ctest test is its own process) stands in for the full disk:
+// every format must throw, naming the file, and leave neither it nor a temporary.
+TEST(ImageIo, FullDiskIsAnErrorAndLeavesNoFile) {
+  const fs::path dir = fs::path(::testing::TempDir()) / "crease_image_full";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const cv::Mat noise = RandomImage(240, 320, 3, 9);
+  std::signal(SIGXFSZ, SIG_IGN);  // the write fails with EFBIG instead of killing the process
+  rlimit old{};
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old), 0);
+  rlimit small = old;
+  small.rlim_cur = 16 * 1024;
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
+  std::vector<std::string> errors;
+  for (const char* name : {"r.png", "r.exr", "r.tif"}) {
+    try {
+      WriteImage(dir / name, noise);
+      errors.push_back("");
+    } catch (const Error& e) {
+      errors.push_back(e.what());
+    }
+  }
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &old), 0);
+  for (size_t i = 0; i < errors.size(); ++i) {
+    EXPECT_NE(errors[i].find("crease_image_full/r."), std::string::npos) << i << ": " << errors[i];
+  }
+  EXPECT_TRUE(fs::is_empty(dir)) << "a partial file or a temporary was left";
+  // Below the limit the same write works.
+  WriteImage(dir / "small.png", RandomImage(8, 8, 3, 1));
+  EXPECT_TRUE(fs::is_regular_file(dir / "small.png"));
 }
 
 }  // namespace
