@@ -1,6 +1,11 @@
 #include "core/file_util.h"
 
+#include <signal.h>
 #include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <vector>
 
 #include <algorithm>
 #include <cctype>
@@ -14,10 +19,18 @@ namespace crease {
 namespace fs = std::filesystem;
 
 namespace {
+// "HOST-PID": a temporary's owner. The host keeps a cleanup on one machine from
+// taking the temporaries of a live process on another that shares the folder.
+std::string OwnerTag() {
+  char host[256] = {0};
+  if (::gethostname(host, sizeof(host) - 1) != 0 || host[0] == 0) std::snprintf(host, sizeof(host), "host");
+  return fmt::format("{}-{}", host, ::getpid());
+}
+
 fs::path TempPathFor(const fs::path& path) {
   // Keep the extension last so extension-sniffing writers (OIIO, VTK) still work.
   return path.parent_path() /
-         fmt::format(".{}.tmp-{}{}", path.stem().string(), ::getpid(), path.extension().string());
+         fmt::format(".{}.tmp-{}{}", path.stem().string(), OwnerTag(), path.extension().string());
 }
 void EnsureParent(const fs::path& path) {
   if (path.has_parent_path() && !path.parent_path().empty()) {
@@ -111,7 +124,8 @@ void WriteFolderAtomic(const fs::path& out, bool overwrite, const std::function<
   }
   const fs::path parent = out.has_parent_path() ? out.parent_path() : fs::path(".");
   fs::create_directories(parent, ec);
-  const fs::path tmp = parent / fmt::format(".{}.tmp-{}", out.filename().string(), ::getpid());
+  RemoveStaleTemporaries(out);
+  const fs::path tmp = parent / fmt::format(".{}.tmp-{}", out.filename().string(), OwnerTag());
   fs::remove_all(tmp, ec);
   fs::create_directories(tmp, ec);
   if (ec) throw Error(fmt::format("{}: cannot create folder: {}", tmp.string(), ec.message()));
@@ -124,6 +138,24 @@ void WriteFolderAtomic(const fs::path& out, bool overwrite, const std::function<
   if (fs::exists(out)) fs::remove_all(out);
   fs::rename(tmp, out, ec);
   if (ec) throw Error(fmt::format("{}: cannot move the finished folder into place: {}", out.string(), ec.message()));
+}
+
+int RemoveStaleTemporaries(const fs::path& out) {
+  const fs::path parent = out.has_parent_path() ? out.parent_path() : fs::path(".");
+  const std::string own = OwnerTag();
+  const std::string prefix = fmt::format(".{}.tmp-{}", out.filename().string(), own.substr(0, own.rfind('-') + 1));
+  std::error_code ec;
+  std::vector<fs::path> stale;
+  for (fs::directory_iterator it(parent, ec), end; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    if (name.rfind(prefix, 0) != 0) continue;
+    const std::string pid = name.substr(prefix.size());
+    if (pid.empty() || pid.size() > 9 || !std::all_of(pid.begin(), pid.end(), ::isdigit)) continue;
+    // kill(pid, 0) fails with ESRCH only when no such process exists.
+    if (::kill(static_cast<pid_t>(std::stol(pid)), 0) != 0 && errno == ESRCH) stale.push_back(it->path());
+  }
+  for (const fs::path& p : stale) fs::remove_all(p, ec);
+  return static_cast<int>(stale.size());
 }
 
 }  // namespace crease

@@ -37,7 +37,14 @@ std::string LowerExtension(const std::filesystem::path& path);
 // then renamed to `out`. An existing `out` is an Error unless `overwrite` (then it
 // is replaced only once `fill` succeeded). If `fill` throws, the temporary folder
 // is removed and `out` is left as it was.
+// The temporary folder is ".NAME.tmp-HOST-PID"; leftovers of killed processes are
+// removed first (RemoveStaleTemporaries).
 void WriteFolderAtomic(const std::filesystem::path& out, bool overwrite,
                        const std::function<void(const std::filesystem::path&)>& fill);
+
+// Removes the temporary folders ".NAME.tmp-HOST-PID" of `out` (NAME its file name)
+// that a crease process on this host left when it was killed: those whose PID is no
+// longer running. A live writer's, and another host's, are kept. Returns how many.
+int RemoveStaleTemporaries(const std::filesystem::path& out);
 
 }  // namespace crease

@@ -10,6 +10,7 @@
 
 #include "core/dataset_info.h"
 #include "core/error.h"
+#include "core/file_util.h"
 #include "core/image_io.h"
 #include "core/json_io.h"
 #include "core/mesh_io.h"
@@ -156,15 +157,12 @@ int WriteDetailTruthMaps(const std::filesystem::path& dataset, const DetailExtra
   const int n = frames < 0 ? info.frames : std::min(frames, info.frames);
   const FaceRig rig = ReadRig(info.RigPath());
   const DetailTruth truth(rig, ReadActor(dataset / "actor.json"), detail);
-  const fs::path tmp = out.parent_path() / fmt::format(".{}.tmp-{}", out.filename().string(), ::getpid());
-  fs::remove_all(tmp);
-  fs::create_directories(tmp);
-  for (int i = first; i < first + n; ++i) {
-    const Eigen::VectorXd beta = ReadTruthExpression(rig, info.TruthPath(i));
-    WriteImage(tmp / fmt::format("{:06d}.exr", i), ResampleSquareMap(truth.Detail(beta), detail.map_resolution));
-  }
-  fs::remove_all(out);
-  fs::rename(tmp, out);
+  WriteFolderAtomic(out, /*overwrite=*/true, [&](const fs::path& tmp) {
+    for (int i = first; i < first + n; ++i) {
+      const Eigen::VectorXd beta = ReadTruthExpression(rig, info.TruthPath(i));
+      WriteImage(tmp / fmt::format("{:06d}.exr", i), ResampleSquareMap(truth.Detail(beta), detail.map_resolution));
+    }
+  });
   return n;
 }
 

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include "tests/test_util.h"
 
@@ -11,6 +12,7 @@ namespace crease {
 namespace {
 
 using testing::TestDir;
+using testing::WriteText;
 
 namespace fs = std::filesystem;
 
@@ -23,6 +25,30 @@ TEST(FileUtil, DevicesAndFifosAreRefused) {
   EXPECT_ERROR_HAS(RequireReadableFile(fifo), fifo.string() + ": is not a regular file");
   EXPECT_ERROR_HAS(RequireReadableFile(fifo.parent_path()), "is a folder");
   EXPECT_ERROR_HAS(RequireReadableFile(fifo.parent_path() / "none"), "file does not exist");
+}
+
+// Issue 19: killed `synth sequence` and `capture` runs left ".NAME.tmp-PID/" folders
+// that nothing removed. The next write of NAME removes those of processes that are
+// gone on this host, and keeps a live process's and another host's.
+TEST(FileUtil, StaleTemporaryFoldersOfDeadProcessesAreRemoved) {
+  const std::filesystem::path dir = crease::testing::TestDir();
+  char host[256] = {0};
+  ASSERT_EQ(::gethostname(host, sizeof(host) - 1), 0);
+  const auto tmp = [&](const std::string& owner) { return dir / (".seq.tmp-" + owner); };
+  const std::string dead = std::string(host) + "-999999999";  // above any pid_max
+  const std::string live = std::string(host) + "-" + std::to_string(::getppid());
+  for (const auto& owner : {dead, live, std::string("elsewhere-999999999")}) {
+    std::filesystem::create_directories(tmp(owner) / "frames");
+  }
+  std::filesystem::create_directories(dir / ".other.tmp-" / "x");
+  EXPECT_EQ(RemoveStaleTemporaries(dir / "seq"), 1);
+  EXPECT_FALSE(std::filesystem::exists(tmp(dead)));
+  EXPECT_TRUE(std::filesystem::exists(tmp(live)));
+  EXPECT_TRUE(std::filesystem::exists(tmp("elsewhere-999999999")));
+  std::filesystem::create_directories(tmp(dead));
+  WriteFolderAtomic(dir / "seq", false, [](const std::filesystem::path& d) { WriteText(d / "a.txt", "a"); });
+  EXPECT_FALSE(std::filesystem::exists(tmp(dead)));
+  EXPECT_TRUE(std::filesystem::is_regular_file(dir / "seq" / "a.txt"));
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include <fmt/ranges.h>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -44,10 +45,18 @@ void ApplyUserOptions(const TrainArgs& a, TrainingOptions* options) {
   if (!a.sets.empty()) SetOptionsFromJson(SetPairsToJson(a.sets), "--set", options);
 }
 
-// The report folder: --report, else <out without extension>_report.
+// The report folder: --report, else <out without extension>_report. It is replaced
+// as a whole, so an existing folder must be empty or an earlier report.
 fs::path ReportDir(const TrainArgs& a) {
   const fs::path out_path(a.out.empty() ? a.pairs_out : a.out);
-  return a.report.empty() ? out_path.parent_path() / (out_path.stem().string() + "_report") : fs::path(a.report);
+  const fs::path dir =
+      a.report.empty() ? out_path.parent_path() / (out_path.stem().string() + "_report") : fs::path(a.report);
+  std::error_code ec;
+  Require(!fs::is_directory(dir, ec) || fs::is_empty(dir, ec) || fs::is_regular_file(dir / "report.json", ec),
+          fmt::format("{}: exists and is not a training report (no report.json); the report replaces its "
+                      "folder, so choose another --report",
+                      dir.string()));
+  return dir;
 }
 
 void WriteTrainingReport(const fs::path& report_dir, const TrainingSummary& summary) {
@@ -68,9 +77,13 @@ void TrainFromPairs(const TrainArgs& a) {
   std::printf("training the PCA and the cascade on %lld pairs of %s\n", static_cast<long long>(pairs.texture.rows()),
               a.pairs_in.c_str());
   TrainingSummary summary;
-  const DetailModel model = TrainDetailModelFromPairs(pairs, options, {report_dir}, &summary, PrintProgressLine);
+  DetailModel model;
+  // The report is written under a temporary name (a killed run leaves no partial report).
+  WriteFolderAtomic(report_dir, /*overwrite=*/true, [&](const fs::path& report) {
+    model = TrainDetailModelFromPairs(pairs, options, {report}, &summary, PrintProgressLine);
+    WriteTrainingReport(report, summary);
+  });
   WriteDetailModel(a.out.empty() ? a.pairs_out : a.out, model);
-  WriteTrainingReport(report_dir, summary);
   std::printf("wrote %s and the report in %s\n", a.out.c_str(), report_dir.string().c_str());
 }
 
@@ -88,21 +101,24 @@ void TrainFromScans(TrainArgs& a) {
   std::printf("training on %s: %zu actors, %d scans, lights: %s\n", a.scans.c_str(), set.actors.size(),
               set.num_scans(), fmt::format("{}", fmt::join(set.lights(), ", ")).c_str());
   TrainingSummary summary;
-  const TrainingPairs pairs = ExtractTrainingPairs(set, rig, options, {report_dir}, &summary, PrintProgressLine);
-  if (!a.pairs_out.empty()) {
-    WriteTrainingPairs(a.pairs_out, pairs);
-    std::printf("wrote %lld training pairs to %s\n", static_cast<long long>(pairs.texture.rows()),
-                a.pairs_out.c_str());
-  }
-  if (a.out.empty()) {
-    WriteTrainingReport(report_dir, summary);
-    return;
-  }
-  const DetailModel model = TrainDetailModelFromPairs(pairs, options, {report_dir}, &summary, PrintProgressLine);
-  WriteDetailModel(a.out, model);
-  // The compatible rig (Sec. 4.1) for inspection; capture derives it from the model's G.
-  WriteRig(report_dir / "compatible_rig.crig", MakeRigCompatible(rig, model.detail));
-  WriteTrainingReport(report_dir, summary);
+  std::optional<DetailModel> model;
+  // The report is written under a temporary name (a killed run leaves no partial report).
+  WriteFolderAtomic(report_dir, /*overwrite=*/true, [&](const fs::path& report) {
+    const TrainingPairs pairs = ExtractTrainingPairs(set, rig, options, {report}, &summary, PrintProgressLine);
+    if (!a.pairs_out.empty()) {
+      WriteTrainingPairs(a.pairs_out, pairs);
+      std::printf("wrote %lld training pairs to %s\n", static_cast<long long>(pairs.texture.rows()),
+                  a.pairs_out.c_str());
+    }
+    if (!a.out.empty()) {
+      model = TrainDetailModelFromPairs(pairs, options, {report}, &summary, PrintProgressLine);
+      // The compatible rig (Sec. 4.1) for inspection; capture derives it from the model's G.
+      WriteRig(report / "compatible_rig.crig", MakeRigCompatible(rig, model->detail));
+    }
+    WriteTrainingReport(report, summary);
+  });
+  if (!model) return;
+  WriteDetailModel(a.out, *model);
   std::printf("wrote %s and the report in %s\n", a.out.c_str(), report_dir.string().c_str());
 }
 
