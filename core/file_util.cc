@@ -84,6 +84,23 @@ void WriteFileAtomicVia(const fs::path& path, const std::function<void(const fs:
   Commit(tmp, path);
 }
 
+void WriteFilesAtomic(const std::vector<PendingFile>& files) {
+  std::vector<fs::path> tmps;
+  std::error_code ec;
+  try {
+    for (const PendingFile& f : files) {
+      EnsureParent(f.path);
+      tmps.push_back(TempPathFor(f.path));
+      f.write(tmps.back());
+      if (!fs::exists(tmps.back())) throw Error(fmt::format("{}: the writer produced no file", f.path.string()));
+    }
+  } catch (...) {
+    for (const fs::path& t : tmps) fs::remove(t, ec);
+    throw;
+  }
+  for (size_t i = 0; i < files.size(); ++i) Commit(tmps[i], files[i].path);
+}
+
 void RequireReadableFile(const fs::path& path) {
   std::error_code ec;
   const fs::file_status status = fs::status(path, ec);  // follows symbolic links

@@ -5,6 +5,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <vector>
 #include <ostream>
 #include <string>
 
@@ -37,6 +38,17 @@ std::string LowerExtension(const std::filesystem::path& path);
 // then renamed to `out`. An existing `out` is an Error unless `overwrite` (then it
 // is replaced only once `fill` succeeded). If `fill` throws, the temporary folder
 // is removed and `out` is left as it was.
+// Several files that belong together (a report and its table): all are written to
+// temporaries first, then renamed into place; if any write fails, the temporaries
+// are removed and no file of the group is touched, so no run leaves a part of its
+// output beside an older part. `write(tmp)` must create the file `tmp` (which keeps
+// the extension of `path`).
+struct PendingFile {
+  std::filesystem::path path;
+  std::function<void(const std::filesystem::path& tmp)> write;
+};
+void WriteFilesAtomic(const std::vector<PendingFile>& files);
+
 // The temporary folder is ".NAME.tmp-HOST-PID"; leftovers of killed processes are
 // removed first (RemoveStaleTemporaries).
 void WriteFolderAtomic(const std::filesystem::path& out, bool overwrite,

@@ -51,5 +51,23 @@ TEST(FileUtil, StaleTemporaryFoldersOfDeadProcessesAreRemoved) {
   EXPECT_TRUE(std::filesystem::is_regular_file(dir / "seq" / "a.txt"));
 }
 
+// Issue 19: `eval` failing on eval_frames.csv left a new eval.json beside the old
+// table. A group of files is written whole or not at all.
+TEST(FileUtil, FileGroupsAreWrittenWholeOrNotAtAll) {
+  const std::filesystem::path dir = crease::testing::TestDir();
+  auto text = [](const std::string& t) { return [t](const std::filesystem::path& p) { WriteText(p, t); }; };
+  WriteText(dir / "eval.json", "old");
+  const auto fails = [](const std::filesystem::path&) { throw Error("disk full"); };
+  EXPECT_THROW(WriteFilesAtomic({{dir / "eval_frames.csv", text("new")}, {dir / "x.md", fails},
+                                 {dir / "eval.json", text("new")}}),
+               Error);
+  std::vector<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) names.push_back(e.path().filename().string());
+  EXPECT_EQ(names, std::vector<std::string>{"eval.json"}) << "a file of the failed group or a temporary is left";
+  WriteFilesAtomic({{dir / "eval_frames.csv", text("new")}, {dir / "eval.json", text("new")}});
+  EXPECT_EQ(ReadFileToString(dir / "eval.json"), "new");
+  EXPECT_EQ(ReadFileToString(dir / "eval_frames.csv"), "new");
+}
+
 }  // namespace
 }  // namespace crease

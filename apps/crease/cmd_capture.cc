@@ -116,11 +116,19 @@ void RunEvalCommand(const EvalArgs& a) {
   const fs::path dir = a.out.empty() ? fs::path(a.capture_dir) : fs::path(a.out);
   fs::create_directories(dir);
   const std::string md = s.ToMarkdown(), js = s.ToJson(), csv = s.ToCsv();
-  WriteFileAtomic(dir / "eval.json", [&](std::ostream& o) { o << js << "\n"; });
-  WriteFileAtomic(dir / "eval_frames.csv", [&](std::ostream& o) { o << csv; });
-  WriteFileAtomic(dir / "eval.md", [&](std::ostream& o) { o << md; });
+  auto text = [](const std::string& t) {
+    return [&t](const fs::path& tmp) { WriteFileAtomic(tmp, [&](std::ostream& o) { o << t; }); };
+  };
+  const std::string js_line = js + "\n";
+  // All or nothing: a failed write left eval.json beside an older eval_frames.csv.
+  std::vector<PendingFile> files = {{dir / "eval_frames.csv", text(csv)}, {dir / "eval.md", text(md)}};
   if (!s.error_vectors.empty()) {  // Fig. 11
-    WriteImage(dir / "error_vectors.png", s.error_vectors, {.srgb = false});
+    files.push_back({dir / "error_vectors.png",
+                     [&](const fs::path& tmp) { WriteImage(tmp, s.error_vectors, {.srgb = false}); }});
+  }
+  files.push_back({dir / "eval.json", text(js_line)});
+  WriteFilesAtomic(files);
+  if (!s.error_vectors.empty()) {
     std::printf("wrote %s (frame %d: 2D error vectors of L^t and L~^t)\n",
                 (dir / "error_vectors.png").string().c_str(), s.error_vectors_frame);
   }
