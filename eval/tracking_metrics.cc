@@ -61,6 +61,11 @@ FrameTruth ReadFrameTruth(const fs::path& dataset, int frame, int num_vertices) 
     t.vertices(i, 1) = v[3 * i + 1];
     t.vertex_visible[i] = v[3 * i + 2] > 0.5f;
   }
+  // Issue 19: NaN truth was accepted and every error computed on it.
+  Require(t.vertices.allFinite(), fmt::format("{}: NaN or infinite vertex projections", bpath.string()));
+  Require(t.landmarks.allFinite() && t.cam_from_head.translation.allFinite() &&
+              t.cam_from_head.rotation.coeffs().allFinite() && t.identity.allFinite(),
+          fmt::format("{}: NaN or infinite landmarks, pose or identity", jpath.string()));
   return t;
 }
 

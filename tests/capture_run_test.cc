@@ -12,6 +12,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -28,7 +29,9 @@
 #include "synth/actor.h"
 #include "synth/dataset.h"
 #include "synth/sequence.h"
+#include "pipeline/capture/capture_io.h"
 #include "tests/detail_model_test_util.h"
+#include "tests/test_util.h"
 #include "tests/synth_test_util.h"
 
 namespace crease {
@@ -219,6 +222,35 @@ TEST(CaptureRun, WritesTheFolderAndSummarisesTheRun) {
 }
 
 // A source without frames is an error naming the input, and leaves no folder behind.
+// Issue 19: NaN in the truth (and in a capture's tracked frame) was accepted and
+// every error computed on it; both readers refuse it, naming the file.
+TEST(CaptureRun, NanTruthAndNanCapturesAreRefused) {
+  const fs::path dir = testing::TestDir();
+  fs::create_directories(dir / "truth");
+  for (const char* f : {"000000.json", "000000_vertices.bin"}) fs::copy_file(TinySequence() / "truth" / f, dir / "truth" / f);
+  EXPECT_EQ(ReadFrameTruth(dir, 0, -1).vertices.rows() > 0, true);
+  {
+    std::fstream bin(dir / "truth" / "000000_vertices.bin", std::ios::in | std::ios::out | std::ios::binary);
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    bin.write(reinterpret_cast<const char*>(&nan), sizeof(nan));
+  }
+  EXPECT_ERROR_HAS(ReadFrameTruth(dir, 0, -1), "000000_vertices.bin: NaN or infinite vertex projections");
+  CaptureFrameArrays a;
+  a.frame = 3;
+  a.tracked = true;
+  a.coarse = MatX3d::Zero(4, 3);
+  a.refined = MatX3d::Zero(4, 3);
+  a.landmarks = MatX2d::Zero(68, 2);
+  WriteCaptureFrameArrays(dir / "f.cfr", a);
+  EXPECT_NO_THROW(ReadCaptureFrameArrays(dir / "f.cfr"));
+  a.refined(2, 1) = std::numeric_limits<double>::quiet_NaN();
+  WriteCaptureFrameArrays(dir / "f.cfr", a);
+  EXPECT_ERROR_HAS(ReadCaptureFrameArrays(dir / "f.cfr"), "f.cfr: a tracked frame holds NaN");
+  a.tracked = false;  // a lost frame's arrays carry no claim
+  WriteCaptureFrameArrays(dir / "f.cfr", a);
+  EXPECT_NO_THROW(ReadCaptureFrameArrays(dir / "f.cfr"));
+}
+
 TEST(CaptureRun, NoFramesIsAnError) {
   const fs::path dataset = TinySequence();
   const fs::path root = testing::FixtureDir("capture_run_empty");

@@ -88,8 +88,10 @@ CaptureFrameArrays ReadCaptureFrameArrays(const std::filesystem::path& path) {
   } catch (const std::exception& e) {
     throw Error(fmt::format("{}: malformed header ({})", what, e.what()));
   }
-  Require(header.contains("frame") && header.contains("tracked") && header.contains("num_vertices"),
-          fmt::format("{}: header lacks frame, tracked or num_vertices", what));
+  Require(header.is_object() && header.contains("frame") && header["frame"].is_number_integer() &&
+              header.contains("tracked") && header["tracked"].is_boolean() && header.contains("num_vertices") &&
+              header["num_vertices"].is_number_integer() && header["num_vertices"].get<int64_t>() >= 0,
+          fmt::format("{}: header lacks an integer frame, a boolean tracked or a count num_vertices", what));
   CaptureFrameArrays out;
   out.frame = header["frame"].get<int>();
   out.tracked = header["tracked"].get<bool>();
@@ -99,6 +101,9 @@ CaptureFrameArrays ReadCaptureFrameArrays(const std::filesystem::path& path) {
   const std::vector<float> lm = file.Get<float>("landmarks", -1, what);
   Require(lm.size() % 2 == 0, fmt::format("{}: landmarks array has an odd size", what));
   out.landmarks = FromFloat<2>(lm);
+  // A tracked frame's meshes and landmarks are numbers (issue 19: eval computed on NaN).
+  Require(!out.tracked || (out.coarse.allFinite() && out.refined.allFinite() && out.landmarks.allFinite()),
+          fmt::format("{}: a tracked frame holds NaN or infinite coordinates in coarse, refined or landmarks", what));
   if (file.arrays.count("flow_vertex")) {
     const std::vector<int32_t> ids = file.Get<int32_t>("flow_vertex", -1, what);
     const int64_t nf = static_cast<int64_t>(ids.size());
