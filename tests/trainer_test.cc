@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include <cstdio>
 #include <fstream>
 #include <unistd.h>
@@ -118,6 +120,20 @@ TEST(Trainer, ExtractsTheStudiosWrinklesAndTrainsAModel) {
   EXPECT_ERROR_HAS(ReadDetailModel(dir / "short.cdm"), "truncated");
   WriteText(dir / "rig.cdm", ReadFileToString(set.rig));
   EXPECT_ERROR_HAS(ReadDetailModel(dir / "rig.cdm"), "not a crease detail model");
+  // NaN in the PCA basis (issue 19: it passed `model info` and failed inside capture).
+  // The writer refuses it; a file holding it (the basis's first four floats found in
+  // the bytes, the first made NaN) is refused by the reader.
+  DetailModel nan_basis = model;
+  nan_basis.pca.basis(0, 0) = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_ERROR_HAS(WriteDetailModel(dir / "nan.cdm", nan_basis), "the PCA's mean, basis or variances hold NaN");
+  std::string nan_bytes = ReadFileToString(dir / "model.cdm");
+  const std::string basis_head(reinterpret_cast<const char*>(model.pca.basis.data()), 4 * sizeof(float));
+  const size_t at = nan_bytes.find(basis_head);
+  ASSERT_NE(at, std::string::npos);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  nan_bytes.replace(at, sizeof(float), reinterpret_cast<const char*>(&nan), sizeof(float));
+  WriteText(dir / "nan.cdm", nan_bytes);
+  EXPECT_ERROR_HAS(ReadDetailModel(dir / "nan.cdm"), "the PCA's mean, basis or variances hold NaN");
 }
 
 // Real scans rarely come in the rig's UV layout: the same set with the UVs

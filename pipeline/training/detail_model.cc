@@ -27,6 +27,9 @@ void DetailModel::Validate(const std::string& what) const {
   Require(cascade.dimensions == pca.dimensions(),
           fmt::format("{}: the fern cascade predicts {} coefficients but the PCA has {} dimensions", what,
                       cascade.dimensions, pca.dimensions()));
+  // Issue 19: NaN in the PCA passed `model info` and failed later, inside capture.
+  Require(pca.mean.allFinite() && pca.basis.allFinite() && pca.variances.allFinite(),
+          fmt::format("{}: the PCA's mean, basis or variances hold NaN or infinite values", what));
   cascade.Check(what);
   if (!baseline.empty()) {
     baseline.Check(what);
