@@ -50,7 +50,14 @@ write_config() {
   node="$(slurmd -C | head -n 1)"
   [[ "$node" == NodeName=* ]] || die "slurmd -C printed no node line: $node"
   mkdir -p "$state"/{munge,ctld,spool,log}
-  chmod 711 "$state/munge"  # munged's socket folder must be o+x
+  # munged's socket must be reachable by all: its folder and every folder above it o+x.
+  chmod 711 "$state" "$state/munge"
+  local d="$state"
+  while [ "$d" != "/" ]; do
+    [ "$(( 0$(stat -c %a "$d") & 1 ))" -eq 1 ] ||
+      die "$d is not searchable by others (o+x), which munged requires of its socket's folders: chmod o+x it or pick another STATE_DIR"
+    d="$(dirname "$d")"
+  done
   if [ ! -s "$state/munge/munge.key" ]; then
     dd if=/dev/urandom of="$state/munge/munge.key" bs=1024 count=1 status=none
   fi
