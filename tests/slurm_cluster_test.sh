@@ -12,7 +12,7 @@
 #   5. bad input: an unknown executor, a missing sbatch, sbatch refusing a job.
 # Skips (exit 77) only when not root or when the Slurm packages are missing;
 # CI runs as root and scripts/setup.sh installs them (scripts/deps.txt).
-# Usage: slurm_test.sh CREASE_BINARY SOURCE_DIR
+# Usage: slurm_cluster_test.sh CREASE_BINARY SOURCE_DIR
 set -u
 crease="$1"; src="$2"
 if [ "$(id -u)" -ne 0 ]; then echo "SKIP: the local Slurm cluster needs root"; exit 77; fi
