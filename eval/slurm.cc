@@ -140,12 +140,16 @@ SlurmQueue ParseSqueue(const std::string& text) {
   std::istringstream in(text);
   std::string line;
   while (std::getline(in, line)) {
-    const auto a = line.find('|');
-    const auto b = a == std::string::npos ? a : line.find('|', a + 1);
-    if (b == std::string::npos) continue;
-    std::string name = line.substr(b + 1);
-    while (!name.empty() && (name.back() == '\r' || name.back() == ' ')) name.pop_back();
-    q[line.substr(0, a)] = SlurmQueueEntry{line.substr(a + 1, b - a - 1), name};
+    while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.pop_back();
+    std::vector<std::string> f;
+    for (size_t start = 0;;) {
+      const auto bar = line.find('|', start);
+      f.push_back(line.substr(start, bar == std::string::npos ? bar : bar - start));
+      if (bar == std::string::npos) break;
+      start = bar + 1;
+    }
+    if (f.size() < 3) continue;
+    q[f[0]] = SlurmQueueEntry{f[1], f[2], f.size() > 3 ? f[3] : ""};
   }
   return q;
 }
@@ -251,7 +255,7 @@ std::string Trimmed(std::string s) {
 SlurmQueue QueryQueue(const SlurmOptions& o, const std::set<std::string>& ids) {
   if (ids.empty()) return {};
   const std::string list = fmt::format("{}", fmt::join(ids, ","));
-  const CommandResult r = RunCommand({o.squeue, "-h", "-o", "%i|%T|%j", "-j", list});
+  const CommandResult r = RunCommand({o.squeue, "-h", "-o", "%i|%T|%j|%r", "-j", list});
   // squeue fails when none of the ids is known any more (they have all left the queue).
   if (r.status != 0 && r.err.find("Invalid job id") != std::string::npos) return {};
   Require(r.status == 0, fmt::format("{} -j {} failed (exit status {}): {}", o.squeue, list, r.status, Trimmed(r.err)));
@@ -362,7 +366,10 @@ void WaitForJobs(const std::vector<std::string>& jobs, const SlurmOptions& o, co
     int queued = 0, running = 0;
     for (auto it = active.begin(); it != active.end();) {
       const auto e = q.find(*it);
-      if (e == q.end()) {
+      // A job whose input failed pends forever where Slurm ignores --kill-on-invalid-dep.
+      const bool orphaned = e != q.end() && e->second.reason == "DependencyNeverSatisfied";
+      if (orphaned) RunCommand({o.scancel, *it});
+      if (e == q.end() || orphaned) {
         it = active.erase(it);
         continue;
       }
@@ -467,9 +474,12 @@ std::string FormatStageStatus(const std::string& experiment, const std::vector<S
                                  experiment, stages.size(), count["done"], count["queued"], count["running"],
                                  count["failed"], count["not submitted"]);
   for (const auto& s : stages) {
-    text += fmt::format("  {:<13} {:<10} {}{}  runs: {}\n", s.state, s.kind, s.key,
+    const std::string runs = s.runs.empty()      ? ""
+                             : s.runs.size() == 1 ? "  run " + s.runs.front()
+                                                  : fmt::format("  runs {} (+{} more)", s.runs.front(), s.runs.size() - 1);
+    text += fmt::format("  {:<13} {:<10} {}{}{}\n", s.state, s.kind, s.key,
                         s.job_id.empty() ? "" : fmt::format("  job {}{}", s.job_id, s.job_state.empty() ? "" : " " + s.job_state),
-                        fmt::join(s.runs, ", "));
+                        runs);
   }
   for (const auto& s : stages) {
     if (s.state != "failed") continue;

@@ -77,11 +77,12 @@ struct SlurmClaim {
 };
 std::optional<SlurmClaim> ReadSlurmClaim(const ExperimentStage& stage);
 
-// The jobs Slurm still holds (queued, running, completing …): job id → state and name,
-// from the output of `squeue -h -o %i|%T|%j`.
+// The jobs Slurm still holds (queued, running, completing …): job id → state, name and
+// reason, from the output of `squeue -h -o %i|%T|%j|%r`.
 struct SlurmQueueEntry {
-  std::string state;  // PENDING, RUNNING, …
+  std::string state;   // PENDING, RUNNING, …
   std::string name;
+  std::string reason;  // why it pends (Dependency, Resources, DependencyNeverSatisfied, …)
 };
 using SlurmQueue = std::map<std::string, SlurmQueueEntry>;
 SlurmQueue ParseSqueue(const std::string& text);
@@ -117,7 +118,8 @@ struct SlurmOptions {
 // Splits --slurm-args text at whitespace ("--partition=short --qos=normal").
 std::vector<std::string> SplitSlurmArgs(const std::string& text);
 
-// Submits the missing stages as jobs, waits until Slurm holds none of them, and
+// Submits the missing stages as jobs, waits until Slurm holds none of them (a job
+// pending with DependencyNeverSatisfied is cancelled: its input failed), and
 // reports each stage's outcome (a failed one with its job, command and output tail).
 // Errors (sbatch missing or failing, squeue failing) name the command and its message.
 StageBackend SlurmBackend(const SlurmOptions& options);

@@ -128,11 +128,16 @@ TEST(Slurm, SbatchArgumentsCarryTheDependenciesAndTheSiteOptions) {
 }
 
 TEST(Slurm, SqueueOutputIsParsed) {
-  const SlurmQueue q = ParseSqueue("12|PENDING|crease-rig-00ff\n13|RUNNING|crease-eval-0a\r\ngarbage\n");
-  ASSERT_EQ(q.size(), 2u);
+  const SlurmQueue q =
+      ParseSqueue("12|PENDING|crease-rig-00ff|Dependency\n13|RUNNING|crease-eval-0a|None\r\ngarbage\n14|PENDING|x\n");
+  ASSERT_EQ(q.size(), 3u);
   EXPECT_EQ(q.at("12").state, "PENDING");
   EXPECT_EQ(q.at("12").name, "crease-rig-00ff");
+  EXPECT_EQ(q.at("12").reason, "Dependency");
   EXPECT_EQ(q.at("13").name, "crease-eval-0a");
+  EXPECT_EQ(q.at("13").reason, "None");
+  EXPECT_EQ(q.at("14").name, "x");
+  EXPECT_EQ(q.at("14").reason, "");
 }
 
 TEST(Slurm, ClaimsAreWaitedOnOnlyWhileTheirJobIsQueued) {
@@ -147,10 +152,10 @@ TEST(Slurm, ClaimsAreWaitedOnOnlyWhileTheirJobIsQueued) {
   };
   complete[at("rig")] = true;
   claims[at("scans")] = SlurmClaim{"7", SlurmJobName(stages[at("scans")])};
-  queue["7"] = {"RUNNING", SlurmJobName(stages[at("scans")])};
+  queue["7"] = {"RUNNING", SlurmJobName(stages[at("scans")]), ""};
   claims[at("tracker")] = SlurmClaim{"8", SlurmJobName(stages[at("tracker")])};  // ended without finishing
   claims[at("actor")] = SlurmClaim{"9", SlurmJobName(stages[at("actor")])};
-  queue["9"] = {"PENDING", "someone-elses-job"};  // the id was reused (a new cluster)
+  queue["9"] = {"PENDING", "someone-elses-job", ""};  // the id was reused (a new cluster)
   auto steps = PlanSlurmSteps(stages, complete, claims, queue);
   EXPECT_EQ(steps[at("rig")].action, SlurmAction::kDone);
   EXPECT_EQ(steps[at("scans")].action, SlurmAction::kWait);
@@ -162,14 +167,14 @@ TEST(Slurm, ClaimsAreWaitedOnOnlyWhileTheirJobIsQueued) {
   // A queued job whose input must be made again waits on a job that is gone:
   // cancelled and submitted again.
   claims[at("pairs")] = SlurmClaim{"10", SlurmJobName(stages[at("pairs")])};
-  queue["10"] = {"PENDING", SlurmJobName(stages[at("pairs")])};
+  queue["10"] = {"PENDING", SlurmJobName(stages[at("pairs")]), ""};
   queue.erase("7");
   steps = PlanSlurmSteps(stages, complete, claims, queue);
   EXPECT_EQ(steps[at("scans")].action, SlurmAction::kSubmit);
   EXPECT_EQ(steps[at("pairs")].action, SlurmAction::kSubmit);
   EXPECT_EQ(steps[at("pairs")].stale_job, "10");
   // Its input queued again instead: it keeps waiting.
-  queue["7"] = {"PENDING", SlurmJobName(stages[at("scans")])};
+  queue["7"] = {"PENDING", SlurmJobName(stages[at("scans")]), ""};
   steps = PlanSlurmSteps(stages, complete, claims, queue);
   EXPECT_EQ(steps[at("pairs")].action, SlurmAction::kWait);
   EXPECT_EQ(steps[at("pairs")].job_id, "10");
@@ -238,7 +243,11 @@ TEST(Slurm, TheBackendSubmitsWhatIsMissingWithAfterokOnItsInputsJobs) {
     for (const auto& d : stages[i].depends) deps += ":" + job[d];
     const std::string line = first[i];
     EXPECT_EQ(line.substr(0, line.find(' ')), job[stages[i].key]);
-    if (!deps.empty()) EXPECT_NE(line.find("--dependency=afterok" + deps + " "), std::string::npos) << line;
+    if (deps.empty()) {
+      EXPECT_EQ(line.find("--dependency"), std::string::npos) << line;
+    } else {
+      EXPECT_NE(line.find("--dependency=afterok" + deps + " "), std::string::npos) << line;
+    }
     EXPECT_NE(line.find(SlurmJobDir(stages[i]).string() + "/job.sh"), std::string::npos) << line;
   }
   const json run = ReadJsonFile(o.out / "runs" / "training.num_ferns=20_seed1.json");
@@ -257,12 +266,16 @@ TEST(Slurm, TheBackendSubmitsWhatIsMissingWithAfterokOnItsInputsJobs) {
   const auto all = Lines(root / "bin" / "sbatch.log");
   ASSERT_EQ(all.size(), first.size() + stages.size() - 2);
   const std::string pairs_key = Kind(stages, "pairs").key;
+  int pairs_lines = 0;
   for (size_t i = first.size(); i < all.size(); ++i) {
     EXPECT_EQ(all[i].find(rig.key + ".slurm"), std::string::npos) << "the complete rig was submitted again";
     EXPECT_EQ(all[i].find(scans.key + ".slurm"), std::string::npos) << "the claimed scans were submitted again";
-    if (all[i].find(pairs_key + ".slurm") != std::string::npos)
+    if (all[i].find(pairs_key + ".slurm") != std::string::npos) {
+      ++pairs_lines;
       EXPECT_NE(all[i].find("--dependency=afterok:" + job[scans.key] + " "), std::string::npos) << all[i];
+    }
   }
+  EXPECT_EQ(pairs_lines, 1);
   // Status from the cache, the claims and (fake) squeue: the rig done, the rest failed.
   const auto status = ExperimentStageStatus(o.out, slurm);
   ASSERT_EQ(status.size(), stages.size());
