@@ -79,7 +79,7 @@ t0=$(date +%s)
 "$crease" experiment run "$tmp/tiny.yaml" -o "$tmp/slurm" --executor slurm --slurm-poll 0.5 > "$tmp/slurm1.log" 2>&1 &
 runner=$!
 job=""
-for _ in $(seq 1 600); do
+for _ in $(seq 1 3000); do  # up to 5 min: CI runs other tests beside this one
   job="$(squeue -h -o '%i %j %T' | awk '$2 ~ /^crease-scans-/ && $3 == "RUNNING" {print $1}')"
   [ -n "$job" ] && break
   kill -0 "$runner" 2>/dev/null || break
@@ -102,7 +102,7 @@ echo "--- status after scancel of job $job:"; head -n 7 "$tmp/status.txt"
 # 3. The rerun resubmits what is missing; a second runner on the same cache submits nothing.
 "$crease" experiment run "$tmp/tiny.yaml" -o "$tmp/slurm" --executor slurm --slurm-poll 0.5 > "$tmp/slurm2.log" 2>&1 &
 runner=$!
-for _ in $(seq 1 300); do grep -q "stages submitted" "$tmp/slurm2.log" && break; sleep 0.1; done
+for _ in $(seq 1 1200); do grep -q "stages submitted" "$tmp/slurm2.log" && break; sleep 0.1; done
 grep -q "slurm: 4 stages submitted, 0 already queued" "$tmp/slurm2.log" || { cat "$tmp/slurm2.log"; fail "the rerun did not submit exactly the 4 missing stages"; }
 "$crease" experiment run "$tmp/tiny.yaml" -o "$tmp/second" --cache "$tmp/slurm/cache" --executor slurm --slurm-poll 0.5 \
   > "$tmp/second.log" 2>&1 || { cat "$tmp/second.log"; fail "the second runner failed"; }
