@@ -24,6 +24,7 @@
 #include "core/file_util.h"
 #include "core/json_io.h"
 #include "eval/capture_metrics.h"
+#include "eval/slurm.h"
 #include "eval/tracker_training.h"
 #include "pipeline/capture/capture.h"
 #include "pipeline/training/trainer.h"
@@ -300,6 +301,9 @@ ExperimentConfig ParseExperimentConfigImpl(const std::string& yaml_text, const s
         }
       }
       c.variants = value;
+    } else if (key == "slurm") {
+      CheckSlurmSection(value, what);
+      c.slurm = value;
     } else if (key == "profiles") {
       Require(value.is_object(), fmt::format("{}: 'profiles' must map a profile name to its settings", what));
       c.profiles = value;
@@ -321,8 +325,8 @@ ExperimentConfig ParseExperimentConfigImpl(const std::string& yaml_text, const s
       bool known = false;
       for (const auto& s : Sections()) known = known || key == s.name;
       if (!known)
-        throw Error(fmt::format("{}: unknown key '{}' (name, title, paper, description, seeds, sweep, profiles, table, "
-                                "figures, claims, or a section: {})",
+        throw Error(fmt::format("{}: unknown key '{}' (name, title, paper, description, seeds, sweep, profiles, slurm, "
+                                "table, figures, claims, or a section: {})",
                                 what, key, Join(ExperimentSections(), ", ")));
       Require(value.is_object() || value.is_null(), fmt::format("{}: section '{}' must be a mapping", what, key));
       const json obj = value.is_null() ? json::object() : value;
@@ -504,6 +508,7 @@ struct RunPlan {
     s.dir = cache / kind / s.key;
     s.argv = argv(s.dir);
     s.depends = std::move(depends);
+    s.slurm = c.slurm;
     stages.push_back(std::move(s));
     return stages.back();
   }
@@ -995,16 +1000,8 @@ StagePlan PlanStages(const std::vector<ExperimentJob>& jobs) {
 // and logs each experiment's plan (to `first`'s log: the first job's).
 void FindCachedStages(StagePlan& plan, const ExperimentRunnerOptions& first) {
   const std::vector<ExperimentStage>& unique = plan.unique;
-  for (size_t i = 0; i < unique.size(); ++i) {
-    const fs::path done = unique[i].dir / "stage.json";
-    if (fs::exists(done)) {
-      try {
-        if (ReadJsonFile(done).at("key_inputs") == unique[i].key_inputs) plan.state[i] = kDone;
-      } catch (const std::exception&) {
-        // unreadable: rebuilt below
-      }
-    }
-  }
+  for (size_t i = 0; i < unique.size(); ++i)
+    if (StageIsComplete(unique[i])) plan.state[i] = kDone;
   for (size_t i = 0; i < unique.size(); ++i)
     if (plan.state[i] == kDone) plan.cached_keys.insert(unique[i].key);
   for (auto& p : plan.planned) {
@@ -1017,8 +1014,8 @@ void FindCachedStages(StagePlan& plan, const ExperimentRunnerOptions& first) {
   }
 }
 
-// Runs one stage in a fresh folder and records it in its stage.json; returns the
-// error, empty if the stage succeeded.
+}  // namespace
+
 std::string ExecuteStage(const ExperimentStage& s, const StageExecutor& executor) {
   std::string error;
   const auto t0 = std::chrono::steady_clock::now();
@@ -1043,6 +1040,43 @@ std::string ExecuteStage(const ExperimentStage& s, const StageExecutor& executor
   }
   return error;
 }
+
+bool StageIsComplete(const ExperimentStage& stage) {
+  const fs::path done = stage.dir / "stage.json";
+  if (!fs::exists(done)) return false;
+  try {
+    return ReadJsonFile(done).at("key_inputs") == stage.key_inputs;
+  } catch (const std::exception&) {
+    return false;  // unreadable: rebuilt
+  }
+}
+
+json StageToJson(const ExperimentStage& s) {
+  return json{{"kind", s.kind}, {"key", s.key},         {"key_inputs", s.key_inputs}, {"dir", s.dir.string()},
+              {"argv", s.argv}, {"depends", s.depends}, {"exclusive", s.exclusive},   {"slurm", s.slurm}};
+}
+
+ExperimentStage StageFromJson(const json& j, const std::string& what) {
+  ExperimentStage s;
+  try {
+    s.kind = j.at("kind").get<std::string>();
+    s.key = j.at("key").get<std::string>();
+    s.key_inputs = j.at("key_inputs");
+    s.dir = j.at("dir").get<std::string>();
+    s.argv = j.at("argv").get<std::vector<std::string>>();
+    s.depends = j.at("depends").get<std::vector<std::string>>();
+    s.exclusive = j.value("exclusive", false);
+    s.slurm = j.value("slurm", json::object());
+  } catch (const json::exception& e) {
+    throw Error(fmt::format("{}: not a stage plan ({})", what, e.what()));
+  }
+  Require(ExperimentKey(s.key_inputs) == s.key,
+          fmt::format("{}: the stage's key {} is not the hash of its key inputs", what, s.key));
+  Require(!s.argv.empty() && s.dir.is_absolute(), fmt::format("{}: the stage has no command or no absolute folder", what));
+  return s;
+}
+
+namespace {
 
 // Runs the pending stages of a plan on worker threads, each stage once its input
 // stages are done.
@@ -1140,7 +1174,58 @@ class StageScheduler {
 
 }  // namespace
 
+namespace {
+
+// out/stages.json of each experiment that asks for it (`crease experiment status`
+// reads it): the stages its runs use, in plan order, with the runs of each.
+void RecordStages(const StagePlan& plan) {
+  for (const auto& p : plan.planned) {
+    if (!p.options->record_stages) continue;
+    std::map<std::string, json> runs_of;
+    for (size_t r = 0; r < p.runs.size(); ++r)
+      for (const auto& s : p.run_stages[r]) runs_of[s.key].push_back(p.runs[r].id);
+    json stages = json::array();
+    for (size_t i = 0; i < plan.unique.size(); ++i) {
+      const auto it = runs_of.find(plan.unique[i].key);
+      if (it == runs_of.end()) continue;
+      json s = StageToJson(plan.unique[i]);
+      s["command"] = ExperimentCommandLine(plan.unique[i].argv);
+      s["runs"] = it->second;
+      stages.push_back(std::move(s));
+    }
+    fs::create_directories(p.options->out);
+    WriteJsonFile(p.options->out / "stages.json",
+                  json{{"experiment", p.config.name}, {"cache", p.options->cache.string()}, {"stages", stages}});
+  }
+}
+
+}  // namespace
+
+StageBackend LocalBackend(const StageExecutor& executor) {
+  return [executor](const std::vector<ExperimentStage>& stages, const std::vector<bool>& cached,
+                    const ExperimentRunnerOptions& options) {
+    StagePlan plan;
+    plan.unique = stages;
+    for (size_t i = 0; i < stages.size(); ++i) {
+      plan.index[stages[i].key] = i;
+      plan.state.push_back(cached[i] ? kDone : kPending);
+    }
+    plan.failure.assign(stages.size(), "");
+    StageScheduler(plan, executor, options).Run(options.jobs);
+    std::vector<StageOutcome> outcomes(stages.size());
+    for (size_t i = 0; i < stages.size(); ++i) {
+      outcomes[i].done = plan.state[i] == kDone;
+      if (!outcomes[i].done) outcomes[i].error = plan.failure[i];
+    }
+    return outcomes;
+  };
+}
+
 std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& jobs, const StageExecutor& executor) {
+  return RunExperiments(jobs, LocalBackend(executor));
+}
+
+std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& jobs, const StageBackend& backend) {
   const auto t_start = std::chrono::steady_clock::now();
   Require(!jobs.empty(), "no experiments to run");
   const ExperimentRunnerOptions& first = jobs.front().options;
@@ -1151,7 +1236,16 @@ std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& 
 
   StagePlan plan = PlanStages(jobs);
   FindCachedStages(plan, first);
-  StageScheduler(plan, executor, first).Run(first.jobs);
+  RecordStages(plan);
+  std::vector<bool> cached(plan.unique.size());
+  for (size_t i = 0; i < cached.size(); ++i) cached[i] = plan.state[i] == kDone;
+  const std::vector<StageOutcome> outcomes = backend(plan.unique, cached, first);
+  Require(outcomes.size() == plan.unique.size(), "the stage backend returned no outcome for some stages");
+  for (size_t i = 0; i < cached.size(); ++i) {
+    if (cached[i]) continue;
+    plan.state[i] = outcomes[i].done ? kDone : kFailed;
+    plan.failure[i] = outcomes[i].error;
+  }
 
   std::vector<ExperimentSummary> summaries;
   for (auto& p : plan.planned) {

@@ -103,6 +103,9 @@ struct ExperimentConfig {
   nlohmann::json profiles = nlohmann::json::object();
   nlohmann::json variants = nlohmann::json::object();  // group → label → {section.field: value}
   nlohmann::json report = nlohmann::json::object();  // table, figures, claims
+  // Batch resources per stage kind for `--executor slurm` (eval/slurm.h: {default|KIND:
+  // {cpus, mem, time}}); never part of a cache key or of the results.
+  nlohmann::json slurm = nlohmann::json::object();
 };
 
 // The option sections a config may hold, in stage order.
@@ -138,7 +141,16 @@ struct ExperimentStage {
   std::vector<std::string> argv;    // crease arguments (without the program)
   std::vector<std::string> depends; // keys of the stages it reads
   bool exclusive = false;           // runs with no other stage beside it (timed captures)
+  nlohmann::json slurm = nlohmann::json::object();  // the config's `slurm` section (not in the key)
 };
+
+// A stage as JSON (the plan file a Slurm job runs, `crease experiment stage`) and back;
+// `what` names the file in errors.
+nlohmann::json StageToJson(const ExperimentStage& stage);
+ExperimentStage StageFromJson(const nlohmann::json& j, const std::string& what);
+
+// Whether the stage's folder holds the finished stage: a stage.json with its key inputs.
+bool StageIsComplete(const ExperimentStage& stage);
 
 // "crease ARG …" with the arguments shell-quoted where needed (re-runnable as printed).
 std::string ExperimentCommandLine(const std::vector<std::string>& argv);
@@ -159,6 +171,13 @@ std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const std::
 using StageExecutor = std::function<int(const std::vector<std::string>& argv, const std::filesystem::path& log)>;
 StageExecutor SubprocessExecutor(const std::filesystem::path& program);
 
+// Makes one stage: removes what an interrupted attempt left in its folder, runs its
+// command through `executor` (log in the folder's log.txt) and, on success only,
+// writes stage.json (kind, key, key inputs, command, seconds), which marks it
+// complete. Returns the error, empty on success. Every executor makes its stage
+// folders through this function (the Slurm jobs too, via `crease experiment stage`).
+std::string ExecuteStage(const ExperimentStage& stage, const StageExecutor& executor);
+
 struct ExperimentRunnerOptions {
   std::filesystem::path out;       // experiment results folder
   std::filesystem::path cache;     // stage cache (shared between experiments)
@@ -170,6 +189,9 @@ struct ExperimentRunnerOptions {
   std::string build_description;   // recorded only (version + git)
   std::string command;             // the command line, recorded for the report
   std::function<void(const std::string&)> log;  // progress lines (may be empty)
+  // Write out/stages.json, the experiment's stages and their folders, which
+  // `crease experiment status` reads (the Slurm executor's runs set it).
+  bool record_stages = false;
 };
 
 struct ExperimentSummary {
@@ -192,6 +214,22 @@ struct ExperimentJob {
   ExperimentRunnerOptions options;
 };
 std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& jobs, const StageExecutor& executor);
+
+// What became of a stage that was not cached.
+struct StageOutcome {
+  bool done = false;   // complete (its stage.json written)
+  std::string error;   // why not, when not done
+};
+// Makes the stages that are not cached. `stages`: every stage of the call,
+// deduplicated by key, each after the stages it reads; `cached[i]`: stage i was
+// complete before. Returns one outcome per stage (cached ones: done). The local
+// backend runs them J at a time (options.jobs) through an executor; the Slurm
+// backend (eval/slurm.h) submits them as batch jobs.
+using StageBackend = std::function<std::vector<StageOutcome>(
+    const std::vector<ExperimentStage>& stages, const std::vector<bool>& cached, const ExperimentRunnerOptions& options)>;
+StageBackend LocalBackend(const StageExecutor& executor);
+// Plans, makes the missing stages with `backend`, collects (as above).
+std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& jobs, const StageBackend& backend);
 
 // Metrics of a finished run from its stage folders: model report (PCA energy,
 // training time) and the mean over its eval.json files (tracking, displacement,
