@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# The ASan+UBSan part of CI (issue 19), run by .ci/run after scripts/test.sh:
+#   1. builds the clang ASan+UBSan build (scripts/asan_build.sh, build-asan/) — only
+#      the test executables below, the fuzz targets and their seed writer;
+#   2. runs, with ctest, the fast unit tests of the loaders and of core (the suites
+#      named in `suites`), and the replay of every committed fuzz finding
+#      (fuzz_regression.*, fuzz/regressions/);
+#   3. runs every fuzz target for ${CREASE_CI_FUZZ_SECONDS:-5} s (scripts/fuzz.sh).
+# The whole suite under ASan would not fit CI's 45 minutes on 2 cores; this subset
+# is every test of the file formats crease reads and of core/.
+#
+# Measured on the CI kind of machine (2 cores, shared; fresh build-asan/):
+#   MEASURED-TIMES
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+build="${CREASE_ASAN_BUILD_DIR:-$root/build-asan}"
+
+# Test executable → its GoogleTest suites (ctest names tests Suite.Name).
+tests=(tri_mesh_test mesh_ops_test mesh_io_test file_util_test vtk_io_test options_test rng_test
+       camera_test face_rig_test timer_test ibug_test json_io_test image_io_test uv_raster_test
+       ray_caster_test sequence_test actor_test scanned_head_test experiment_test pca_test
+       fern_cascade_test trainer_test shape_regressor_test)
+suites=(TriMesh CotangentLaplacian GeodesicDistance MassMatrix MeshLowpass MeshOpsSeams VertexNormals
+        MeshIo Obj Ply FileUtil AnyMesh Pvd Vtp Options Rng Camera FaceRig RigImport Progress Timer Ibug
+        JsonIo ImageIo UvRaster RayCaster SphereTest Sequence Actor ScannedHead Experiment PcaTest
+        FernCascadeTest Trainer ShapeRegressor)
+fuzzers=(ply_fuzzer obj_fuzzer vtp_fuzzer gltf_fuzzer png_fuzzer exr_fuzzer crig_fuzzer cdm_fuzzer ctrk_fuzzer
+         cpr_fuzzer scans_json_fuzzer dataset_json_fuzzer camera_json_fuzzer actor_json_fuzzer
+         options_yaml_fuzzer experiment_yaml_fuzzer sequence_yaml_fuzzer)
+
+start=$(date +%s)
+"$root/scripts/asan_build.sh" "${tests[@]}" "${fuzzers[@]}" write_seeds
+built=$(date +%s)
+regex="^(($(IFS='|'; echo "${suites[*]}"))\\.|fuzz_regression\\.)"
+export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1}" UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1}"
+printf '[crease asan] ctest -R %s\n' "$regex"
+ctest --test-dir "$build" --output-on-failure -j "$(nproc)" -R "$regex"
+tested=$(date +%s)
+"$root/scripts/fuzz.sh" "${CREASE_CI_FUZZ_SECONDS:-5}"
+done_at=$(date +%s)
+printf '[crease asan] build %d s, tests %d s, fuzzing %d s\n' \
+  $((built - start)) $((tested - built)) $((done_at - tested))
