@@ -43,7 +43,8 @@ fz="$build/fuzz"
 rm -rf "$fz/seeds"
 "$fz/write_seeds" "$fz/seeds"
 
-export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1}" UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1}"
+export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1}" UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1}" \
+  LSAN_OPTIONS="${LSAN_OPTIONS:-suppressions=$root/fuzz/lsan.supp}"
 failed=()
 printf '%-24s %12s %10s %8s  %s\n' target executions exec/s seconds result
 for t in "${targets[@]}"; do

@@ -17,13 +17,14 @@ build="${CREASE_ASAN_BUILD_DIR:-$root/build-asan}"
 
 # Test executable → its GoogleTest suites (ctest names tests Suite.Name).
 tests=(tri_mesh_test mesh_ops_test mesh_io_test file_util_test vtk_io_test options_test rng_test
-       camera_test face_rig_test timer_test ibug_test json_io_test image_io_test uv_raster_test
-       ray_caster_test sequence_test actor_test scanned_head_test experiment_test pca_test
-       fern_cascade_test trainer_test shape_regressor_test)
+       camera_test face_rig_test timer_test ibug_test json_io_test image_io_test ray_caster_test
+       sequence_test actor_test scanned_head_test experiment_test)
+# Left out as too slow under ASan: UvRaster (two tests over 120 s each) and the Actor
+# tests that build and render whole actors (40-100 s each); Actor's JSON tests stay.
 suites=(TriMesh CotangentLaplacian GeodesicDistance MassMatrix MeshLowpass MeshOpsSeams VertexNormals
         MeshIo Obj Ply FileUtil AnyMesh Pvd Vtp Options Rng Camera FaceRig RigImport Progress Timer Ibug
-        JsonIo ImageIo UvRaster RayCaster SphereTest Sequence Actor ScannedHead Experiment PcaTest
-        FernCascadeTest Trainer ShapeRegressor)
+        JsonIo ImageIo RayCaster SphereTest Sequence ScannedHead Experiment
+        'Actor\.MalformedJsonNamesFileAndField' 'Actor\.JsonRoundTripRebuildsIdentically')
 fuzzers=(ply_fuzzer obj_fuzzer vtp_fuzzer gltf_fuzzer png_fuzzer exr_fuzzer crig_fuzzer cdm_fuzzer ctrk_fuzzer
          cpr_fuzzer scans_json_fuzzer dataset_json_fuzzer camera_json_fuzzer actor_json_fuzzer
          options_yaml_fuzzer experiment_yaml_fuzzer sequence_yaml_fuzzer)
@@ -31,8 +32,9 @@ fuzzers=(ply_fuzzer obj_fuzzer vtp_fuzzer gltf_fuzzer png_fuzzer exr_fuzzer crig
 start=$(date +%s)
 "$root/scripts/asan_build.sh" "${tests[@]}" "${fuzzers[@]}" write_seeds
 built=$(date +%s)
-regex="^(($(IFS='|'; echo "${suites[*]}"))\\.|fuzz_regression\\.)"
-export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1}" UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1}"
+regex="^(($(IFS='|'; echo "${suites[*]}"))(\\.|$)|fuzz_regression\\.)"
+export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1}" UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1}" \
+  LSAN_OPTIONS="${LSAN_OPTIONS:-suppressions=$root/fuzz/lsan.supp}"
 printf '[crease asan] ctest -R %s\n' "$regex"
 ctest --test-dir "$build" --output-on-failure -j "$(nproc)" -R "$regex"
 tested=$(date +%s)

@@ -81,6 +81,19 @@ TEST(FrameSource, ImageFoldersVideosAndErrors) {
   EXPECT_ERROR_HAS(OpenFrameSource(dir / "empty"), "no images");
   WriteText(dir / "not_a_video.mp4", "hello");
   EXPECT_ERROR_HAS(OpenFrameSource(dir / "not_a_video.mp4"), "not_a_video.mp4");
+  // Issue 19 (fuzz/dataset_json_fuzzer): a dataset.json that is not an object, or whose
+  // fps is not a positive number, is an error naming the file (nlohmann's type_error,
+  // an internal error, before).
+  WriteImage(dir / "ds" / "frames" / "000000.png", im);
+  const std::string ds_json = (dir / "ds" / "dataset.json").string();
+  WriteText(dir / "ds" / "dataset.json", "{\"fps\": 24}");
+  EXPECT_EQ(OpenFrameSource(dir / "ds")->info().fps, 24.0);
+  WriteText(dir / "ds" / "dataset.json", "[1, 2]");
+  EXPECT_ERROR_HAS(OpenFrameSource(dir / "ds"), ds_json + ": a dataset description must be a JSON object, not array");
+  WriteText(dir / "ds" / "dataset.json", "{\"fps\": \"fast\"}");
+  EXPECT_ERROR_HAS(OpenFrameSource(dir / "ds"), ds_json + ": fps must be a positive number, got \"fast\"");
+  WriteText(dir / "ds" / "dataset.json", "{\"fps\": 0}");
+  EXPECT_ERROR_HAS(OpenFrameSource(dir / "ds"), ds_json + ": fps must be a positive number, got 0");
 }
 
 // Runs the tracker over the talking sequence and returns the mean errors.

@@ -138,6 +138,19 @@ class ImageFolderSource final : public FrameSource {
   size_t next_ = 0;
 };
 
+// dataset.json's frame rate (30 when absent). A top-level array or an "fps" that is
+// not a number was nlohmann's type_error, an internal error (fuzz/dataset_json_fuzzer,
+// issue 19).
+double DatasetFps(const nlohmann::json& ds, const fs::path& json_path) {
+  Require(ds.is_object(), fmt::format("{}: a dataset description must be a JSON object, not {}", json_path.string(),
+                                      ds.type_name()));
+  const auto fps = ds.find("fps");
+  if (fps == ds.end()) return 30.0;
+  Require(fps->is_number() && fps->get<double>() > 0,
+          fmt::format("{}: fps must be a positive number, got {}", json_path.string(), fps->dump()));
+  return fps->get<double>();
+}
+
 }  // namespace
 
 std::unique_ptr<FrameSource> OpenFrameSource(const fs::path& path) {
@@ -145,11 +158,11 @@ std::unique_ptr<FrameSource> OpenFrameSource(const fs::path& path) {
   if (fs::is_directory(path)) {
     if (fs::is_regular_file(path / "dataset.json")) {
       // A crease sequence dataset: its frames and its camera.
-      const nlohmann::json ds = ReadJsonFile(path / "dataset.json");
+      const double fps = DatasetFps(ReadJsonFile(path / "dataset.json"), path / "dataset.json");
       auto source = std::make_unique<ImageFolderSource>(path / "frames", "dataset");
       FrameSourceInfo& info = source->mutable_info();
       info.path = path;
-      info.fps = ds.value("fps", 30.0);
+      info.fps = fps;
       if (fs::is_regular_file(path / "camera.json")) info.camera = ReadCamera(path / "camera.json");
       return source;
     }
