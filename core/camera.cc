@@ -101,6 +101,14 @@ double NumberField(const nlohmann::json& j, const char* key, const std::string& 
   Require(it->is_number(), fmt::format("{}: camera field '{}' must be a number", what, key));
   return it->get<double>();
 }
+// An image size: a whole number that fits an int (a width of 1e10 was undefined
+// behaviour in the conversion, issue 19); Validate() then requires it positive.
+int IntField(const nlohmann::json& j, const char* key, const std::string& what) {
+  const double v = NumberField(j, key, what);
+  Require(v == std::floor(v) && std::abs(v) <= std::numeric_limits<int>::max(),
+          fmt::format("{}: camera field '{}' must be a whole number of pixels, got {}", what, key, v));
+  return static_cast<int>(v);
+}
 std::vector<double> ArrayField(const nlohmann::json& j, const char* key, size_t n, const std::string& what) {
   auto it = j.find(key);
   Require(it != j.end() && it->is_array() && it->size() == n,
@@ -121,8 +129,8 @@ Camera CameraFromJson(const nlohmann::json& j, const std::string& what) {
   c.intrinsics.fy = NumberField(j, "fy", what);
   c.intrinsics.cx = NumberField(j, "cx", what);
   c.intrinsics.cy = NumberField(j, "cy", what);
-  c.intrinsics.width = static_cast<int>(NumberField(j, "width", what));
-  c.intrinsics.height = static_cast<int>(NumberField(j, "height", what));
+  c.intrinsics.width = IntField(j, "width", what);
+  c.intrinsics.height = IntField(j, "height", what);
   c.intrinsics.Validate(what);
   auto pose = j.find("cam_from_head");
   Require(pose != j.end() && pose->is_object(),

@@ -149,6 +149,13 @@ void FaceRig::Validate(const std::string& what) const {
 
 namespace {
 
+// memcpy for arrays that may be empty: an empty Eigen matrix or vector has a null
+// data(), and memcpy from or to null is undefined even for 0 bytes (UBSan,
+// fuzz/crig_fuzzer, issue 19).
+void CopyBytes(void* dst, const char* src, size_t bytes) {
+  if (bytes > 0) std::memcpy(dst, src, bytes);
+}
+
 constexpr char kMagic[8] = {'C', 'R', 'E', 'A', 'S', 'R', 'I', 'G'};
 
 struct ArrayDesc {
@@ -348,18 +355,18 @@ FaceRig ReadRig(const fs::path& path) {
         if (dst3) {
           if (d.shape[1] != 3) throw Error(fmt::format("{}: array V must be #V x 3", what));
           dst3->resize(d.shape[0], 3);
-          std::memcpy(dst3->data(), p, d.bytes());
+          CopyBytes(dst3->data(), p, d.bytes());
         } else {
           if (d.shape[1] != 2) throw Error(fmt::format("{}: array UV must be #V x 2", what));
           rig.neutral.UV.resize(d.shape[0], 2);
-          std::memcpy(rig.neutral.UV.data(), p, d.bytes());
+          CopyBytes(rig.neutral.UV.data(), p, d.bytes());
         }
       } else if (d.name == "F") {
         dims(2);
         dtype("i32");
         if (d.shape[1] != 3) throw Error(fmt::format("{}: array F must be #F x 3", what));
         rig.neutral.F.resize(d.shape[0], 3);
-        std::memcpy(rig.neutral.F.data(), p, d.bytes());
+        CopyBytes(rig.neutral.F.data(), p, d.bytes());
       } else if (d.name == "identity_basis" || d.name == "expression_basis") {
         dims(2);
         Eigen::MatrixXf& B = d.name == "identity_basis" ? rig.identity_basis : rig.expression_basis;
@@ -375,23 +382,23 @@ FaceRig ReadRig(const fs::path& path) {
           }
         } else {
           dtype("f32");
-          std::memcpy(B.data(), p, d.bytes());
+          CopyBytes(B.data(), p, d.bytes());
         }
       } else if (d.name == "original_vertex") {
         dims(1);
         dtype("i32");
         rig.original_vertex.resize(d.shape[0]);
-        std::memcpy(rig.original_vertex.data(), p, d.bytes());
+        CopyBytes(rig.original_vertex.data(), p, d.bytes());
       } else if (d.name == "vertex_part") {
         dims(1);
         dtype("u8");
         rig.vertex_part.resize(d.shape[0]);
-        std::memcpy(rig.vertex_part.data(), p, d.bytes());
+        CopyBytes(rig.vertex_part.data(), p, d.bytes());
       } else if (d.name.rfind("region:", 0) == 0) {
         dims(2);
         dtype("u8");
         cv::Mat m(static_cast<int>(d.shape[0]), static_cast<int>(d.shape[1]), CV_8UC1);
-        std::memcpy(m.data, p, d.bytes());
+        CopyBytes(m.data, p, d.bytes());
         rig.regions.push_back({d.name.substr(7), m});
       }
       // Unknown arrays (a later minor addition) are skipped.

@@ -58,7 +58,12 @@ class JsonReader final : public OptionVisitor {
   void Field(const char* n, int64_t& v) override { Integer(n, v); }
   void Field(const char* n, uint64_t& v) override { Integer(n, v); }
   void Field(const char* n, float& v) override {
-    if (const json* x = Find(n)) v = static_cast<float>(Number(n, *x));
+    if (const json* x = Find(n)) {
+      // A finite double beyond float's range has no float (undefined behaviour, issue 19).
+      const double d = Number(n, *x);
+      Expect(!std::isfinite(d) || std::abs(d) <= std::numeric_limits<float>::max(), n, "a number in float's range");
+      v = static_cast<float>(d);
+    }
   }
   void Field(const char* n, double& v) override {
     if (const json* x = Find(n)) v = Number(n, *x);
@@ -99,9 +104,11 @@ class JsonReader final : public OptionVisitor {
       Expect(u <= static_cast<uint64_t>(std::numeric_limits<T>::max()), n, "an integer in range");
       v = static_cast<T>(u);
     } else {
+      // max() + 1 is a power of two, exact as a double; int64's max() itself rounds up
+      // to 2^63, which "<=" let through into an undefined conversion (issue 19).
       const double d = x->get<double>();
       Expect(d >= static_cast<double>(std::numeric_limits<T>::lowest()) &&
-                 d <= static_cast<double>(std::numeric_limits<T>::max()),
+                 d < static_cast<double>(std::numeric_limits<T>::max()) + 1.0,
              n, "an integer in range");
       v = x->is_number_integer() ? static_cast<T>(x->get<int64_t>()) : static_cast<T>(d);
     }
@@ -117,7 +124,10 @@ class JsonReader final : public OptionVisitor {
         Expect(e.is_string(), n, "a list of strings");
         out.push_back(e.get<std::string>());
       } else if constexpr (std::is_same_v<T, int>) {
-        Expect(e.is_number_integer(), n, "a list of integers");
+        Expect(e.is_number_integer() && e.get<int64_t>() >= std::numeric_limits<int>::lowest() &&
+                   (e.is_number_unsigned() ? e.get<uint64_t>() <= static_cast<uint64_t>(std::numeric_limits<int>::max())
+                                           : e.get<int64_t>() <= std::numeric_limits<int>::max()),
+               n, "a list of integers in int's range");
         out.push_back(e.get<int>());
       } else {
         Expect(e.is_number(), n, "a list of numbers");
@@ -206,7 +216,15 @@ Json YamlToJson(const YAML::Node& node, const std::string& what, size_t* count) 
     }
     case YAML::NodeType::Map: {
       Json o = Json::object();
-      for (const auto& kv : node) o[kv.first.as<std::string>()] = YamlToJson<Json>(kv.second, what, count);
+      for (const auto& kv : node) {
+        // A list or mapping as a key ("[a]: 1") was yaml-cpp's bad conversion, an
+        // internal error (issue 19).
+        if (!kv.first.IsScalar() && !kv.first.IsNull()) {
+          throw Error(fmt::format("{}:{}:{}: a key must be a plain name, not a list or mapping", what,
+                                  kv.first.Mark().line + 1, kv.first.Mark().column + 1));
+        }
+        o[kv.first.as<std::string>()] = YamlToJson<Json>(kv.second, what, count);
+      }
       return o;
     }
   }
@@ -222,7 +240,17 @@ Json LoadYaml(const std::string& yaml_text, const std::string& what) {
     throw Error(fmt::format("{}: malformed YAML: {}", what, e.what()));
   }
   size_t count = 0;
-  return YamlToJson<Json>(node, what, &count);
+  Json j = YamlToJson<Json>(node, what, &count);
+  // Bytes that are not UTF-8 became JSON strings that nlohmann refuses to write:
+  // type_error 316, an internal error (issue 19). They come from the text, or from
+  // yaml-cpp itself on valid UTF-8 holding a NUL byte (fuzz/regressions/
+  // experiment_yaml_fuzzer/nul_byte.yaml). Writing the result once finds them.
+  try {
+    (void)j.dump();
+  } catch (const nlohmann::json::type_error& e) {
+    throw Error(fmt::format("{}: the YAML holds a string that is not UTF-8 ({})", what, e.what()));
+  }
+  return j;
 }
 
 }  // namespace
@@ -232,7 +260,7 @@ void SetFieldsFromJsonText(const std::string& json_text, const std::string& what
   json j;
   try {
     j = json::parse(json_text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, or out_of_range for 1e400 (issue 19)
     throw Error(fmt::format("{}: malformed JSON: {}", what, e.what()));
   }
   SetFromJson(j, what, options, visit);

@@ -395,7 +395,7 @@ ExperimentConfig ApplyProfile(const ExperimentConfig& config, const std::string&
           ExperimentConfig trial = c;
           SetSweepValue(&trial, key, value, what + ": sweep");
         }
-        auto it = std::find_if(c.sweep.values.begin(), c.sweep.values.end(), [&](const auto& e) { return e.first == key; });
+        auto it = std::find_if(c.sweep.values.begin(), c.sweep.values.end(), [&key = key](const auto& e) { return e.first == key; });  // clang 14: no capture of a binding
         if (it == c.sweep.values.end()) {
           c.sweep.values.emplace_back(key, values);
           if (c.sweep.mode == "none") c.sweep.mode = "list";

@@ -316,7 +316,7 @@ Actor ActorFromJson(const std::string& text, const std::string& what) {
   json j;
   try {
     j = json::parse(text);
-  } catch (const json::parse_error& e) {
+  } catch (const json::exception& e) {  // parse_error, or out_of_range for 1e400 (issue 19)
     throw Error(fmt::format("{}: malformed JSON ({})", what, e.what()));
   }
   const Reader r(what);

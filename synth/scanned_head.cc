@@ -66,13 +66,20 @@ std::vector<double> ReadAccessor(const tinygltf::Model& model, int index, int co
   Require(acc.bufferView >= 0 && acc.bufferView < static_cast<int>(model.bufferViews.size()),
           fmt::format("{}: {} has no buffer view (sparse accessors are not supported)", what, name));
   const tinygltf::BufferView& view = model.bufferViews[acc.bufferView];
-  const tinygltf::Buffer& buffer = model.buffers.at(view.buffer);
+  Require(view.buffer >= 0 && view.buffer < static_cast<int>(model.buffers.size()),
+          fmt::format("{}: the buffer view of {} refers to a missing buffer {}", what, name, view.buffer));
+  const tinygltf::Buffer& buffer = model.buffers[view.buffer];
   const int csize = tinygltf::GetComponentSizeInBytes(acc.componentType);
   Require(csize > 0, fmt::format("{}: {} has an unknown component type", what, name));
-  const size_t stride = view.byteStride > 0 ? view.byteStride : static_cast<size_t>(csize * components);
+  const size_t element = static_cast<size_t>(csize) * components;
+  const size_t stride = view.byteStride > 0 ? view.byteStride : element;
+  // Bounds as "what is left", so that no offset or count can overflow them (a count near
+  // 2^64 passed a wrapped-around check before: fuzz/gltf_fuzzer, issue 19).
+  const size_t size = buffer.data.size();
+  const auto past_end = [&] { return Error(fmt::format("{}: {} runs past the end of its buffer", what, name)); };
+  if (view.byteOffset > size || acc.byteOffset > size - view.byteOffset) throw past_end();
   const size_t start = view.byteOffset + acc.byteOffset;
-  Require(acc.count == 0 || start + stride * (acc.count - 1) + static_cast<size_t>(csize * components) <= buffer.data.size(),
-          fmt::format("{}: {} runs past the end of its buffer", what, name));
+  if (acc.count > 0 && (element > size - start || (acc.count - 1) > (size - start - element) / stride)) throw past_end();
   std::vector<double> out(acc.count * components);
   for (size_t i = 0; i < acc.count; ++i) {
     const unsigned char* p = buffer.data.data() + start + i * stride;
@@ -161,6 +168,9 @@ TriMesh ReadGltfMesh(const std::filesystem::path& path, cv::Mat* base_color, dou
       if (prim.indices >= 0) {
         const std::vector<double> idx = ReadAccessor(model, prim.indices, 1, what, "indices");
         Require(idx.size() % 3 == 0, fmt::format("{}: triangle indices are not a multiple of 3", what));
+        for (double k : idx) {
+          Require(k < n, fmt::format("{}: mesh '{}' has a triangle index {} beyond its {} vertices", what, mesh.name, k, n));
+        }
         for (size_t i = 0; i < idx.size(); i += 3) {
           F.emplace_back(base + static_cast<int>(idx[i]), base + static_cast<int>(idx[i + 1]), base + static_cast<int>(idx[i + 2]));
         }
@@ -190,7 +200,8 @@ TriMesh ReadGltfMesh(const std::filesystem::path& path, cv::Mat* base_color, dou
         Require(source >= 0 && source < static_cast<int>(model.images.size()),
                 fmt::format("{}: the base colour texture has no image", what));
         const tinygltf::Image& img = model.images[source];
-        Require(img.bits == 8 && img.component >= 3 && !img.image.empty(),
+        Require(img.bits == 8 && (img.component == 3 || img.component == 4) && img.width > 0 && img.height > 0 &&
+                    img.image.size() == static_cast<size_t>(img.width) * img.height * img.component,
                 fmt::format("{}: the base colour image must be 8-bit RGB(A)", what));
         cv::Mat rgba(img.height, img.width, CV_8UC(img.component), const_cast<unsigned char*>(img.image.data()));
         cv::Mat rgb;

@@ -304,13 +304,9 @@ void ReadGroup(const YAML::Node& node, const std::string& group, const std::vect
 
 }  // namespace
 
-Sequence ParseSequenceYaml(const std::string& text, const std::string& what) {
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    throw Error(fmt::format("{}: malformed YAML: {}", what, e.what()));
-  }
+namespace {
+
+Sequence SequenceFromYaml(const YAML::Node& root, const std::string& what) {
   Require(root.IsMap(), fmt::format("{}: a sequence must be a YAML mapping with 'keys'", what));
   static const std::set<std::string> top = {"name", "fps", "duration_s", "interpolation", "motion_blur", "keys"};
   for (const auto& kv : root) {
@@ -352,6 +348,25 @@ Sequence ParseSequenceYaml(const std::string& text, const std::string& what) {
   s.duration_s = root["duration_s"] ? Number(root["duration_s"], what + ": duration_s") : s.keys.back().t;
   s.Validate(what);
   return s;
+}
+
+}  // namespace
+
+Sequence ParseSequenceYaml(const std::string& text, const std::string& what) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw Error(fmt::format("{}: malformed YAML: {}", what, e.what()));
+  }
+  try {
+    return SequenceFromYaml(root, what);
+  } catch (const YAML::Exception& e) {
+    // A list or mapping where a name or string belongs ("name: [a]", "[k]: 1"): yaml-cpp's
+    // bad conversion, an internal error before (found by fuzz/sequence_yaml_fuzzer, issue 19).
+    throw Error(fmt::format("{}:{}:{}: expected a single value here, not a list or mapping ({})", what,
+                            e.mark.line + 1, e.mark.column + 1, e.msg));
+  }
 }
 
 Sequence ReadSequenceYaml(const std::filesystem::path& path) {

@@ -99,6 +99,19 @@ TEST(Camera, JsonRoundTripAndErrors) {
   j = CameraToJson(cam);
   j["fx"] = -3;
   EXPECT_THROW(CameraFromJson(j, "cam.json"), Error);
+  // Issue 19: an image size beyond int was undefined behaviour (UBSan in the sanitizer
+  // build, fuzz/regressions/camera_json_fuzzer); a fraction of a pixel is refused too.
+  for (const double width : {1e10, -1e10, 640.5}) {
+    j = CameraToJson(cam);
+    j["width"] = width;
+    try {
+      CameraFromJson(j, "cam.json");
+      FAIL() << width;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("cam.json: camera field 'width' must be a whole number of pixels"),
+                std::string::npos) << e.what();
+    }
+  }
 }
 
 }  // namespace

@@ -94,7 +94,7 @@ TEST(DatasetInfo, RefusesBadFieldsNamingFileAndKey) {
   const fs::path dir = TestDir();
   EXPECT_NE(ErrorOf([&] { ReadSequenceDatasetInfo(dir); }).find("dataset.json: missing"), std::string::npos);
   WriteText(dir / "dataset.json", "{\"frames\": 1e400}");
-  EXPECT_NE(ErrorOf([&] { ReadSequenceDatasetInfo(dir); }).find("dataset.json: unreadable JSON"), std::string::npos);
+  EXPECT_NE(ErrorOf([&] { ReadSequenceDatasetInfo(dir); }).find("dataset.json: malformed JSON"), std::string::npos);
 }
 
 // Issue 19: files.frame "{frame:999999999d}" made eval take 6.2 GB; a frame pattern

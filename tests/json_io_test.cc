@@ -47,5 +47,19 @@ TEST(JsonIo, MalformedFileNamesLineAndColumn) {
   }
 }
 
+// Issue 19 (fuzz/camera_json_fuzzer): a number beyond double's range was an
+// nlohmann out_of_range exception ("internal error" without the file).
+TEST(JsonIo, NumberOutOfRangeNamesTheFile) {
+  const fs::path p = fs::path(::testing::TempDir()) / "crease_json_1e400.json";
+  std::ofstream(p) << "{\"fx\": 1e400}";
+  try {
+    ReadJsonFile(p);
+    FAIL();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find(p.string() + ": malformed JSON"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("1e400"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace crease

@@ -101,6 +101,33 @@ TEST(Options, YamlAliasBombIsRefused) {
   EXPECT_NE(e.find("bomb.yaml: the YAML expands to more than"), std::string::npos) << e;
 }
 
+// Issue 19 (fuzz/options_yaml_fuzzer, fuzz/experiment_yaml_fuzzer): a list or mapping
+// as a key was yaml-cpp's bad conversion (an internal error); numbers beyond a field's
+// type were undefined conversions (UBSan in the sanitizer build). All name the file.
+TEST(Options, KeysAndNumbersBeyondTheirTypesAreRefused) {
+  ExampleOptions o;
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromYaml("beta: 1\n[num_ferns]: 3\n", "k.yaml", &o); })
+                .find("k.yaml:2:1: a key must be a plain name, not a list or mapping"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromYaml("alpha: 1e300\n", "f.yaml", &o); })
+                .find("f.yaml: option 'alpha' must be a number in float's range"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromYaml("seed: 18446744073709551616\n", "u.yaml", &o); })
+                .find("u.yaml: option 'seed' must be an integer in range"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromYaml("kernels: [1, 4294967296]\n", "l.yaml", &o); })
+                .find("l.yaml: option 'kernels' must be a list of integers in int's range"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromYaml("solver: \"\xC9\"\n", "u8.yaml", &o); })
+                .find("u8.yaml: the YAML holds a string that is not UTF-8"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { YamlToJsonText("a: \x9B\n", "u8.yaml"); }).find("u8.yaml: the YAML holds a string that is not UTF-8"),
+            std::string::npos);
+  SetOptionsFromYaml("alpha: 3e38\nseed: 18446744073709549568\n", "ok.yaml", &o);
+  EXPECT_EQ(o.alpha, 3e38f);
+  EXPECT_EQ(o.seed, 18446744073709549568ull);
+}
+
 // Two nested option structs registering one key (issue 18: one YAML key silently
 // set two weights) are refused, naming the key, whatever reads the options.
 struct Colliding {

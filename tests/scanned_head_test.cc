@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <numbers>
 #include <tiny_gltf.h>
 
@@ -243,6 +244,39 @@ TEST(ScannedHead, ReadsGltfWithItsBaseColourTexture) {
   model.meshes[0].primitives[0].attributes.erase("TEXCOORD_0");
   ASSERT_TRUE(writer.WriteGltfSceneToFile(&model, (dir / "no_uv.gltf").string(), true, true, true, false));
   EXPECT_NE(ErrorOf([&] { LoadScannedHead(dir / "no_uv.gltf", "", "", ScannedHeadOptions{}); }).find("TEXCOORD_0"),
+            std::string::npos);
+}
+
+// Issue 19 (fuzz/gltf_fuzzer): sizes and indices in a glTF that lie are clear errors
+// naming the file. A buffer view naming a missing buffer was std::out_of_range (an
+// internal error), an accessor count near 2^64 wrapped the bounds check around, and an
+// index beyond the vertices reached the mesh as an int conversion of any double.
+TEST(ScannedHead, GltfWithLyingSizesIsAClearError) {
+  const fs::path dir = TestDir();
+  // One triangle: 3 positions (float VEC3), 3 UVs (float VEC2), 3 uint16 indices.
+  const std::string triangle = "AAAAAAAAAAAAAAAACtcjPAAAAAAAAAAAAAAAAArXIzwAAAAAAAAAAAAAAAAAAIA/AAAAAAAAAAAAAIA/AAABAAIAAAA=";
+  const std::string index_7 = "AAAAAAAAAAAAAAAACtcjPAAAAAAAAAAAAAAAAArXIzwAAAAAAAAAAAAAAAAAAIA/AAAAAAAAAAAAAIA/AAABAAcAAAA=";
+  auto gltf = [&](const std::string& name, const std::string& data, int position_buffer, const std::string& position_count) {
+    const fs::path path = dir / name;
+    std::ofstream(path) << R"({"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+      "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 1}, "indices": 2}]}],
+      "buffers": [{"byteLength": 68, "uri": "data:application/octet-stream;base64,)" << data << R"("}],
+      "bufferViews": [{"buffer": )" << position_buffer << R"(, "byteOffset": 0, "byteLength": 36},
+                      {"buffer": 0, "byteOffset": 36, "byteLength": 24}, {"buffer": 0, "byteOffset": 60, "byteLength": 6}],
+      "accessors": [{"bufferView": 0, "componentType": 5126, "count": )" << position_count << R"(, "type": "VEC3"},
+                    {"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC2"},
+                    {"bufferView": 2, "componentType": 5123, "count": 3, "type": "SCALAR"}]})";
+    return path;
+  };
+  EXPECT_EQ(ReadGltfMesh(gltf("ok.gltf", triangle, 0, "3")).num_faces(), 1);
+  const fs::path missing = gltf("missing_buffer.gltf", triangle, 5, "3");
+  EXPECT_NE(ErrorOf([&] { ReadGltfMesh(missing); }).find(missing.string() + ": the buffer view of POSITION refers to a missing buffer 5"),
+            std::string::npos);
+  const fs::path huge = gltf("huge_count.gltf", triangle, 0, "4611686018427387904");
+  EXPECT_NE(ErrorOf([&] { ReadGltfMesh(huge); }).find(huge.string() + ": POSITION runs past the end of its buffer"),
+            std::string::npos);
+  const fs::path beyond = gltf("index_7.gltf", index_7, 0, "3");
+  EXPECT_NE(ErrorOf([&] { ReadGltfMesh(beyond); }).find(beyond.string() + ": mesh '' has a triangle index 7 beyond its 3 vertices"),
             std::string::npos);
 }
 

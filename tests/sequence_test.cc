@@ -115,6 +115,14 @@ TEST(Sequence, YamlRoundTripAndErrors) {
   EXPECT_NE(ErrorOf([] { ParseSequenceYaml("frames: 3\nkeys:\n  - t: 0\n", "f.yaml"); }).find("unknown field 'frames'"),
             std::string::npos);
   EXPECT_NE(ErrorOf([] { ParseSequenceYaml("keys: []\n", "e.yaml"); }).find("non-empty list"), std::string::npos);
+  // Issue 19 (fuzz/sequence_yaml_fuzzer): a list where a string belongs was yaml-cpp's
+  // bad conversion, an internal error without the file.
+  EXPECT_NE(ErrorOf([] { ParseSequenceYaml("name:\n  - t: 0\nkeys:\n  - t: 0\n", "l.yaml"); })
+                .find("l.yaml:2:3: expected a single value here, not a list or mapping"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([] { ParseSequenceYaml("keys:\n  - t: 0\n    [pose]: 1\n", "k.yaml"); })
+                .find("k.yaml:3:5: expected a single value here"),
+            std::string::npos);
 }
 
 TEST(Sequence, ExpressionNamesResolveOntoLeftRightPairs) {

@@ -81,6 +81,20 @@ TEST(FrameSource, ImageFoldersVideosAndErrors) {
   EXPECT_ERROR_HAS(OpenFrameSource(dir / "empty"), "no images");
   WriteText(dir / "not_a_video.mp4", "hello");
   EXPECT_ERROR_HAS(OpenFrameSource(dir / "not_a_video.mp4"), "not_a_video.mp4");
+  // Issue 19 (fuzz/dataset_json_fuzzer): a dataset.json that is not an object, or whose
+  // fps is not a positive number, is an error naming the file (nlohmann's type_error,
+  // an internal error, before); core/dataset_info.h reads it.
+  WriteImage(dir / "ds" / "frames" / "000000.png", im);
+  const std::string ds_json = (dir / "ds" / "dataset.json").string();
+  const std::string head = R"({"format": "crease synthetic sequence", "version": 1, "frames": 1, "width": 64, "height": 48)";
+  WriteText(dir / "ds" / "dataset.json", head + R"(, "fps": 24})");
+  EXPECT_EQ(OpenFrameSource(dir / "ds")->info().fps, 24.0);
+  WriteText(dir / "ds" / "dataset.json", "[1, 2]");
+  EXPECT_ERROR_HAS(OpenFrameSource(dir / "ds"), ds_json + ": must be a JSON object");
+  WriteText(dir / "ds" / "dataset.json", head + R"(, "fps": "fast"})");
+  EXPECT_ERROR_HAS(OpenFrameSource(dir / "ds"), ds_json + ": fps must be a number in (0, 1000], not \"fast\"");
+  WriteText(dir / "ds" / "dataset.json", head + R"(, "fps": 0})");
+  EXPECT_ERROR_HAS(OpenFrameSource(dir / "ds"), ds_json + ": fps must be a number in (0, 1000], not 0");
 }
 
 // Runs the tracker over the talking sequence and returns the mean errors.

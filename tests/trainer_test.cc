@@ -234,6 +234,18 @@ TEST(Trainer, BadScanSets) {
   WriteText(dir / "scans.json", R"({"format": "crease scan set", "version": 2, "actors": [{"folder": "a", "scans": [
       {"name": "neutral", "mesh": "n.ply", "images": []}, {"name": "smile", "mesh": "s.ply", "images": []}]}]})");
   EXPECT_ERROR_HAS(ReadScanSet(dir), "n.ply' does not exist");
+  // Issue 19 (fuzz/scans_json_fuzzer): fields of the wrong type are errors naming the
+  // file and the field (nlohmann's type_error, an internal error, before).
+  const std::string index = (dir / "scans.json").string();
+  WriteText(dir / "scans.json", R"({"format": 7, "version": 2})");
+  EXPECT_ERROR_HAS(ReadScanSet(dir), index + ": 'format' must be \"crease scan set\"");
+  WriteText(dir / "scans.json", R"({"format": "crease scan set", "version": "2"})");
+  EXPECT_ERROR_HAS(ReadScanSet(dir), index + ": scan set version \"2\" is not supported");
+  for (const char* f : {"n.ply", "s.ply", "c.json", "i.png"}) WriteText(dir / "a" / f, "x");
+  WriteText(dir / "scans.json", R"({"format": "crease scan set", "version": 2, "actors": [{"folder": "a", "scans": [
+      {"name": "neutral", "mesh": "n.ply", "images": [{"camera": "c.json", "image": "i.png", "light": 3}]},
+      {"name": "smile", "mesh": "s.ply", "images": [{"camera": "c.json", "image": "i.png"}]}]}]})");
+  EXPECT_ERROR_HAS(ReadScanSet(dir), index + ": actors[0].scans[0].images[0]: field 'light' must be a string, got 3");
   TrainingOptions o;
   o.training_lights = "";
   EXPECT_ERROR_HAS(o.Check(), "training_lights");

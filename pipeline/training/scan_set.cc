@@ -37,6 +37,14 @@ std::string GetString(const json& j, const char* key, const std::string& where) 
   return j[key].get<std::string>();
 }
 
+// An optional string field: `fallback` when absent, an error naming it when it is not a
+// string (json::value() threw nlohmann's type_error, an internal error: issue 19).
+std::string OptionalString(const json& j, const char* key, const std::string& fallback, const std::string& where) {
+  if (!j.contains(key)) return fallback;
+  Require(j[key].is_string(), fmt::format("{}: field '{}' must be a string, got {}", where, key, j[key].dump()));
+  return j[key].get<std::string>();
+}
+
 fs::path ExistingFile(const fs::path& base, const std::string& relative, const std::string& where) {
   const fs::path p = base / relative;
   Require(fs::is_regular_file(p), fmt::format("{}: file '{}' does not exist", where, p.string()));
@@ -52,12 +60,12 @@ ScanSet ReadScanSet(const fs::path& dir) {
           fmt::format("{}: no scans.json (a scan set folder needs one; see docs/formats.md)", dir.string()));
   const json index = ReadJsonFile(index_path);
   const std::string where = index_path.string();
-  Require(index.is_object() && index.value("format", "") == "crease scan set",
+  Require(index.is_object() && index.contains("format") && index["format"] == "crease scan set",
           fmt::format("{}: 'format' must be \"crease scan set\"", where));
-  const int version = index.value("version", 0);
-  Require(version == 2, fmt::format("{}: scan set version {} is not supported (this crease reads version 2; "
-                                    "regenerate synthetic sets with `crease synth scans`)",
-                                    where, version));
+  Require(index.contains("version") && index["version"] == 2,
+          fmt::format("{}: scan set version {} is not supported (this crease reads version 2; "
+                      "regenerate synthetic sets with `crease synth scans`)",
+                      where, index.contains("version") ? index["version"].dump() : "(none)"));
   ScanSet set;
   set.root = dir;
   if (index.contains("rig")) set.rig = ExistingFile(dir, GetString(index, "rig", where), where);
@@ -86,7 +94,7 @@ ScanSet ReadScanSet(const fs::path& dir) {
         ScanImage im;
         im.camera = ExistingFile(actor.folder, GetString(ji, "camera", wi), wi);
         im.image = ExistingFile(actor.folder, GetString(ji, "image", wi), wi);
-        im.light = ji.value("light", "");
+        im.light = OptionalString(ji, "light", "", wi);
         scan.images.push_back(im);
       }
       if (js.contains("truth") && js["truth"].contains("expression_displacement")) {
@@ -98,7 +106,7 @@ ScanSet ReadScanSet(const fs::path& dir) {
       }
       actor.scans.push_back(std::move(scan));
     }
-    const std::string neutral = ja.value("neutral", "neutral");
+    const std::string neutral = OptionalString(ja, "neutral", "neutral", wa);
     actor.neutral = 0;
     bool named = false;
     for (size_t s = 0; s < actor.scans.size(); ++s) {
