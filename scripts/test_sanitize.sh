@@ -11,7 +11,9 @@
 # `all` subset: fresh build dir, warm ccache 4.0 min in all (build 83 s, 132 tests 42 s,
 # 17 targets × 5 s 116 s); with an empty clang ccache its build alone took about 53 min
 # (it compiles every library), which with scripts/test.sh's cold build would pass CI's
-# 45 minutes. Hence CI runs `core`; its timings are in README ("Fuzzing and sanitizers").
+# 45 minutes. Hence CI runs `core`: in a clean clone (crease 0.4.4, 2 vCPUs) its build
+# took 152 s with a warm ccache and 3 min 56 s with none (CCACHE_DISABLE=1), its 111
+# tests 16 s, its 6 fuzz targets 38 s; .ci/run in all 13 min 8 s with a warm cache.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${CREASE_ASAN_BUILD_DIR:-$root/build-asan}"
