@@ -428,8 +428,11 @@ Actor ReadActor(const std::filesystem::path& path) {
 ActorModel::ActorModel(const FaceRig& rig, const Actor& actor) : rig_(PersonalRig(rig, actor)), actor_(actor) {
   actor_.options.Check();
   Require(rig_.neutral.has_uv(), "ActorModel: the rig has no UV coordinates");
-  Require(actor_.identity.size() <= rig_.num_identity(),
-          fmt::format("ActorModel: the actor has {} identity coefficients, the rig only {} modes",
+  // An actor belongs to the rig it was made for (issue 19: 3 of 26 coefficients were
+  // taken silently, the rest as zero).
+  Require(actor_.identity.size() == rig_.num_identity(),
+          fmt::format("ActorModel: the actor has {} identity coefficients but the rig {} identity modes; an actor "
+                      "is made for one rig (crease synth actor --rig)",
                       actor_.identity.size(), rig_.num_identity()));
   const int R = actor_.options.resolution;
   anchors_ = ComputeFaceAnchors(rig_);

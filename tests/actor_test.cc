@@ -444,6 +444,12 @@ TEST(Actor, MalformedJsonNamesFileAndField) {
   // out_of_range, an internal error without the file.
   EXPECT_NE(read_with("\"age\":", "\"age\": 1e400, \"z\":").find(file + ": malformed JSON"), std::string::npos);
   EXPECT_NE(testing::ErrorOf([&] { ReadActor(dir / "absent.json"); }).find("absent.json"), std::string::npos);
+  // Issue 19: an actor with fewer identity coefficients than its rig has modes was
+  // rendered with the rest as zero; the model refuses it.
+  Actor few = GenerateActor(rig, 3, TestOptions(128));
+  few.identity.conservativeResize(3);
+  EXPECT_NE(testing::ErrorOf([&] { ActorModel model(rig, few); }).find("the actor has 3 identity coefficients but"),
+            std::string::npos);
 }
 
 // Looking at the result: writes wrinkle maps and raking-light renders of the
