@@ -2,6 +2,7 @@
 
 #include <cctype>
 #include <cmath>
+#include <optional>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -42,11 +43,11 @@ void CheckFrameFields(const std::string& pattern, const std::string& where) {
   }
 }
 
-// An integer field in [lo, hi]; `fallback` when absent (nullptr: the key is required).
-int IntField(const json& j, const char* key, int lo, int hi, const int* fallback, const fs::path& file) {
+// An integer field in [lo, hi]; `fallback` when absent (none: the key is required).
+int IntField(const json& j, const char* key, int lo, int hi, std::optional<int> fallback, const fs::path& file) {
   const auto it = j.find(key);
   if (it == j.end()) {
-    Require(fallback != nullptr, fmt::format("{}: the key '{}' is missing", file.string(), key));
+    Require(fallback.has_value(), fmt::format("{}: the key '{}' is missing", file.string(), key));
     return *fallback;
   }
   Require(it->is_number_integer(), fmt::format("{}: {} must be an integer, not {}", file.string(), key, it->dump()));
@@ -76,8 +77,7 @@ void ReadFormat(const json& j, const fs::path& file) {
   Require(format != j.end() && format->is_string() && format->get<std::string>() == SequenceDatasetInfo::kFormat,
           fmt::format("{}: format must be \"{}\"; is this a `crease synth sequence` dataset?", file.string(),
                       SequenceDatasetInfo::kFormat));
-  const int any_version = -1;
-  const int version = IntField(j, "version", 0, 1 << 30, &any_version, file);
+  const int version = IntField(j, "version", 0, 1 << 30, -1, file);
   Require(version == SequenceDatasetInfo::kVersion,
           fmt::format("{}: version {} is not supported (this crease reads version {})", file.string(), version,
                       SequenceDatasetInfo::kVersion));
@@ -129,12 +129,11 @@ SequenceDatasetInfo ReadSequenceDatasetInfo(const fs::path& dir) {
   const json j = ReadJsonFile(d.json_path);
   ReadFormat(j, d.json_path);
   if (const auto it = j.find("sequence"); it != j.end() && it->is_string()) d.sequence = it->get<std::string>();
-  const int zero = 0;
-  d.first_frame = IntField(j, "first_frame", 0, kMaxFrames, &zero, d.json_path);
-  d.frames = IntField(j, "frames", 1, kMaxFrames, nullptr, d.json_path);
+  d.first_frame = IntField(j, "first_frame", 0, kMaxFrames, 0, d.json_path);
+  d.frames = IntField(j, "frames", 1, kMaxFrames, std::nullopt, d.json_path);
   d.fps = FpsField(j, d.json_path);
-  d.width = IntField(j, "width", 16, 8192, nullptr, d.json_path);
-  d.height = IntField(j, "height", 16, 8192, nullptr, d.json_path);
+  d.width = IntField(j, "width", 16, 8192, std::nullopt, d.json_path);
+  d.height = IntField(j, "height", 16, 8192, std::nullopt, d.json_path);
   d.rig = RelativeFileField(j, "rig", "rig.crig", d.json_path);
   d.tracking_rig = RelativeFileField(j, "tracking_rig", "", d.json_path);
   d.frame_pattern = DatasetFramePattern(j, d.json_path);

@@ -127,6 +127,16 @@ std::string ReadFileToString(const fs::path& path) {
   return ss.str();
 }
 
+std::string ReadFileTail(const fs::path& path, size_t max_chars) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return "";
+  std::stringstream ss;
+  ss << in.rdbuf();
+  std::string s = ss.str();
+  if (s.size() > max_chars) s = "…" + s.substr(s.size() - max_chars);
+  return s;
+}
+
 std::string LowerExtension(const fs::path& path) {
   std::string ext = path.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
@@ -167,7 +177,7 @@ int RemoveStaleTemporaries(const fs::path& out) {
     const std::string name = it->path().filename().string();
     if (name.rfind(prefix, 0) != 0) continue;
     const std::string pid = name.substr(prefix.size());
-    if (pid.empty() || pid.size() > 9 || !std::all_of(pid.begin(), pid.end(), ::isdigit)) continue;
+    if (pid.empty() || pid.size() > 9 || !std::all_of(pid.begin(), pid.end(), [](unsigned char c) { return std::isdigit(c) != 0; })) continue;
     // kill(pid, 0) fails with ESRCH only when no such process exists.
     if (::kill(static_cast<pid_t>(std::stol(pid)), 0) != 0 && errno == ESRCH) stale.push_back(it->path());
   }

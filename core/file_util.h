@@ -31,6 +31,10 @@ std::string ReadFileToString(const std::filesystem::path& path);
 // file" (devices, FIFOs and sockets are refused: they may never end or block).
 void RequireReadableFile(const std::filesystem::path& path);
 
+// The last `max_chars` bytes of a file, prefixed with "…" when cut; "" when it cannot
+// be read (for log tails in error reports).
+std::string ReadFileTail(const std::filesystem::path& path, size_t max_chars);
+
 // Lower-case extension including the dot (".ply"), "" when none.
 std::string LowerExtension(const std::filesystem::path& path);
 

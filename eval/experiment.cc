@@ -225,16 +225,17 @@ void SetSweepValue(ExperimentConfig* config, const std::string& key, const json&
     SetDotted(config, k, v, fmt::format("{} (variant {}={})", what, key, value.get<std::string>()));
 }
 
-std::string ShellQuote(const std::string& s) {
-  if (!s.empty() && s.find_first_not_of("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-.,/=:+@%") ==
-                        std::string::npos)
+}  // namespace
+
+std::string ShellQuote(const std::string& s, bool always) {
+  if (!always && !s.empty() &&
+      s.find_first_not_of("ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789_-.,/=:+@%") ==
+          std::string::npos)
     return s;
   std::string q = "'";
   for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
   return q + "'";
 }
-
-}  // namespace
 
 std::string ExperimentCommandLine(const std::vector<std::string>& argv) {
   std::string out = "crease";
@@ -799,16 +800,6 @@ void Flatten(const json& j, const std::string& prefix, json* out) {
   }
 }
 
-std::string TailOfFile(const fs::path& path, size_t max_chars) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return "";
-  std::stringstream ss;
-  ss << in.rdbuf();
-  std::string s = ss.str();
-  if (s.size() > max_chars) s = "…" + s.substr(s.size() - max_chars);
-  return s;
-}
-
 json MachineJson() {
   json m;
   m["cpus"] = std::thread::hardware_concurrency();
@@ -1026,7 +1017,7 @@ std::string ExecuteStage(const ExperimentStage& s, const StageExecutor& executor
     const int rc = executor(s.argv, s.dir / "log.txt");
     if (rc != 0) {
       error = fmt::format("{} stage failed (exit status {}): {}\n{}", s.kind, rc, ExperimentCommandLine(s.argv),
-                          TailOfFile(s.dir / "log.txt", 1500));
+                          ReadFileTail(s.dir / "log.txt", 1500));
     } else {
       const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       WriteJsonFile(s.dir / "stage.json", json{{"kind", s.kind},

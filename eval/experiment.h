@@ -152,6 +152,10 @@ ExperimentStage StageFromJson(const nlohmann::json& j, const std::string& what);
 // Whether the stage's folder holds the finished stage: a stage.json with its key inputs.
 bool StageIsComplete(const ExperimentStage& stage);
 
+// `s` as one POSIX shell word: in single quotes (inner ' as '\''), unless it is
+// non-empty and only of characters the shell leaves alone and `always` is false.
+std::string ShellQuote(const std::string& s, bool always = false);
+
 // "crease ARG …" with the arguments shell-quoted where needed (re-runnable as printed).
 std::string ExperimentCommandLine(const std::vector<std::string>& argv);
 

@@ -77,22 +77,6 @@ std::string SlurmJobName(const ExperimentStage& stage) { return "crease-" + stag
 namespace {
 
 // Single-quoted for a shell script.
-std::string Quote(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-std::string TailOf(const fs::path& path, size_t max_chars) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return "";
-  std::stringstream ss;
-  ss << in.rdbuf();
-  std::string s = ss.str();
-  if (s.size() > max_chars) s = "…" + s.substr(s.size() - max_chars);
-  return s;
-}
-
 }  // namespace
 
 std::string SlurmJobScript(const ExperimentStage& stage, const fs::path& program) {
@@ -108,7 +92,8 @@ std::string SlurmJobScript(const ExperimentStage& stage, const fs::path& program
                    stage.kind, stage.key);
   s += "#   " + ExperimentCommandLine(stage.argv) + "\n";
   s += "# made in " + stage.dir.string() + " through `crease experiment stage` (stage.json marks it complete).\n";
-  s += "exec " + Quote(program.string()) + " experiment stage " + Quote((dir / "plan.json").string()) + "\n";
+  s += "exec " + ShellQuote(program.string(), /*always=*/true) + " experiment stage " +
+       ShellQuote((dir / "plan.json").string(), /*always=*/true) + "\n";
   return s;
 }
 
@@ -388,8 +373,8 @@ void WaitForJobs(const std::vector<std::string>& jobs, const SlurmOptions& o, co
 // Why stage `s` (made by `job`) is not complete.
 std::string FailureOf(const ExperimentStage& s, const std::string& job, const std::string& job_state, bool input_failed) {
   if (input_failed) return "an input stage failed";
-  const std::string out = TailOf(SlurmJobDir(s) / fmt::format("slurm-{}.out", job), 1200);
-  const std::string log = TailOf(s.dir / "log.txt", 800);
+  const std::string out = ReadFileTail(SlurmJobDir(s) / fmt::format("slurm-{}.out", job), 1200);
+  const std::string log = ReadFileTail(s.dir / "log.txt", 800);
   return fmt::format("{} stage failed (Slurm job {}{}): {}\n{}{}", s.kind, job,
                      job_state.empty() ? "" : ", " + job_state, ExperimentCommandLine(s.argv),
                      out.empty() ? "" : "job output: " + out, log.empty() ? "" : "\nstage log: " + log);
