@@ -57,7 +57,7 @@ cv::Vec3f Bilinear(const cv::Mat& im, double x, double y) {
 
 ExtractedTexture ExtractTexture(const TriMesh& mesh, const UvRaster& raster, const RayCaster* caster,
                                 const std::vector<Camera>& cameras, const std::vector<cv::Mat>& images,
-                                const TextureOptions& options) {
+                                const TextureOptions& options, const MatX3d* view_normals) {
   options.Check();
   Require(cameras.size() == images.size() && !cameras.empty(),
           fmt::format("ExtractTexture: {} cameras but {} images", cameras.size(), images.size()));
@@ -77,7 +77,10 @@ ExtractedTexture ExtractTexture(const TriMesh& mesh, const UvRaster& raster, con
       rgb[c] = im;
     }
   }
-  const MatX3d normals = VertexNormals(mesh);
+  Require(!view_normals || view_normals->rows() == mesh.num_vertices(),
+          fmt::format("ExtractTexture: {} view normals for a mesh of {} vertices",
+                      view_normals ? view_normals->rows() : 0, mesh.num_vertices()));
+  const MatX3d normals = view_normals ? *view_normals : VertexNormals(mesh);
   const int W = raster.width, H = raster.height;
   ExtractedTexture out;
   out.color = cv::Mat::zeros(H, W, CV_32FC3);

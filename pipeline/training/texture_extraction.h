@@ -9,8 +9,24 @@
 // normal) contributes its bilinearly sampled colour with weight cos(θ)^p, θ the
 // angle between normal and view direction. T is the weighted mean.
 //
-// Differences from the paper: the paper does not say how the scan images are
-// combined; a cosine-weighted blend of all visible cameras is the common choice.
+// Differences from the paper:
+//   1. The paper does not say how the scan images are combined; a cosine-weighted
+//      blend of all visible cameras is the common choice.
+//   2. The view angle θ (the max_view_angle_deg test and the weight) can be judged
+//      by normals other than the mesh's own (`view_normals`): the trainer passes the
+//      normals of M_0^j, the scan without its expression detail (Sec. 4.1). With the
+//      scan's own normals, the walls of a wrinkle tilt θ by up to ±30°, so on an
+//      oblique forehead the upper walls of the lines exceed the limit and vanish
+//      from T^j (black streaks exactly on the wrinkles, which the capture's
+//      texture, taken through the smooth L~^t, never has). Measured on a studio scan
+//      (brow raise, one camera, 1024² map): 3,127 of 53,725 forehead texels were
+//      dropped as back-facing with the scan's normals, 0 with M_0^j's (the
+//      report's texture picture: 3,714 black texels on the forehead → 275, the
+//      rest truly occluded). Effect on the detail-ladder's quick profile (one seed,
+//      studio light, 640×480): R0 held out 0.333 → 0.316, R2 D^t in the wrinkle
+//      regions 0.247 → 0.258 (band 0.313 → 0.308), R3 0.086 → 0.077, still face
+//      0.89 → 0.87: within one seed's noise. The holes were real, but they are
+//      not what limits the detail regression (issue 17).
 #pragma once
 
 #include <vector>
@@ -48,10 +64,12 @@ struct ExtractedTexture {
 // `raster` from RasterizeUv on `mesh` (same triangles), `caster` a RayCaster of
 // `mesh` for visibility (null: no occlusion test). images[i] is the linear-light
 // CV_32FC3 (or CV_32F) photograph of cameras[i], sized like its intrinsics.
-// Throws Error naming the camera on a size mismatch.
+// `view_normals` (#V×3, optional): the normals that judge the view angle θ
+// (Difference 2); null = the mesh's own vertex normals. Throws Error naming the
+// camera on a size mismatch.
 ExtractedTexture ExtractTexture(const TriMesh& mesh, const UvRaster& raster, const RayCaster* caster,
                                 const std::vector<Camera>& cameras, const std::vector<cv::Mat>& images,
-                                const TextureOptions& options);
+                                const TextureOptions& options, const MatX3d* view_normals = nullptr);
 
 // Rec. 709 luminance of a linear CV_32FC3 image (CV_32F passes through).
 cv::Mat Luminance(const cv::Mat& linear_rgb);
