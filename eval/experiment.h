@@ -180,7 +180,12 @@ StageExecutor SubprocessExecutor(const std::filesystem::path& program);
 // writes stage.json (kind, key, key inputs, command, seconds), which marks it
 // complete. Returns the error, empty on success. Every executor makes its stage
 // folders through this function (the Slurm jobs too, via `crease experiment stage`).
+// All of it happens under an exclusive lock of StageLockFile (flock): two runners on
+// one cache never make a stage twice. The second waits for the first, then finds the
+// stage complete and returns "" without running anything.
 std::string ExecuteStage(const ExperimentStage& stage, const StageExecutor& executor);
+// cache/<kind>/<key>.lock, beside the stage's folder.
+std::filesystem::path StageLockFile(const ExperimentStage& stage);
 
 struct ExperimentRunnerOptions {
   std::filesystem::path out;       // experiment results folder
