@@ -8,7 +8,8 @@
 #      scans task is cancelled (scancel JOBID_TASK) mid-stage: the runner fails, the
 #      stage has no stage.json, `crease experiment status` names it failed with its
 #      command and its state, which the claim keeps;
-#   3. a rerun resubmits only what is missing (not the other scans task), and a second
+#   3. a rerun resubmits only what is missing (not the other scans task; 7 stages in
+#      5 sbatch calls, since the other seed's stages are now a wave ahead), and a second
 #      runner started on the same cache meanwhile submits nothing (it waits on the
 #      first one's claims);
 #   4. results.csv equals the local one except timing columns, experiment.json is
@@ -115,7 +116,9 @@ echo "--- status after scancel of job $job:"; head -n 7 "$tmp/status.txt"
 "$crease" experiment run "$tmp/tiny.yaml" -o "$tmp/slurm" --executor slurm --slurm-poll 0.5 > "$tmp/slurm2.log" 2>&1 &
 runner=$!
 for _ in $(seq 1 1200); do grep -q "stages submitted" "$tmp/slurm2.log" && break; sleep 0.1; done
-grep -q "slurm: 7 stages submitted in 3 sbatch calls (2 arrays), 0 already queued" "$tmp/slurm2.log" ||
+# The other seed's scans are complete, so its pairs and models are a wave ahead of the
+# cancelled seed's: scans, pairs 2, pairs 1, models 2 (an array), models 1 (an array).
+grep -q "slurm: 7 stages submitted in 5 sbatch calls (2 arrays), 0 already queued" "$tmp/slurm2.log" ||
   { cat "$tmp/slurm2.log"; fail "the rerun did not submit exactly the 7 missing stages (the cancelled scans alone)"; }
 "$crease" experiment run "$tmp/tiny.yaml" -o "$tmp/second" --cache "$tmp/slurm/cache" --executor slurm --slurm-poll 0.5 \
   > "$tmp/second.log" 2>&1 || { cat "$tmp/second.log"; fail "the second runner failed"; }
