@@ -195,7 +195,7 @@ struct ExperimentRunnerOptions {
   int jobs = 1;                    // stages run at once
   int shard = 0, num_shards = 1;   // run only this slice of the runs
   std::string program_version;     // enters every cache key (crease's version number)
-  std::string build_description;   // recorded only (version + git)
+  std::string build_description;   // recorded only (crease_version: version + git, fixed at build time)
   std::string command;             // the command line, recorded for the report
   std::function<void(const std::string&)> log;  // progress lines (may be empty)
   // Write out/stages.json, the experiment's stages and their folders, which
