@@ -21,6 +21,7 @@
 #include <fmt/format.h>
 
 #include "core/error.h"
+#include "core/file_lock.h"
 #include "core/file_util.h"
 #include "core/json_io.h"
 #include "eval/capture_metrics.h"
@@ -1007,29 +1008,41 @@ void FindCachedStages(StagePlan& plan, const ExperimentRunnerOptions& first) {
 
 }  // namespace
 
-std::string ExecuteStage(const ExperimentStage& s, const StageExecutor& executor) {
-  std::string error;
+namespace {
+
+// ExecuteStage's work once it holds the stage's lock.
+std::string MakeStage(const ExperimentStage& s, const StageExecutor& executor) {
   const auto t0 = std::chrono::steady_clock::now();
+  std::error_code ec;
+  fs::remove_all(s.dir, ec);  // an incomplete folder of an earlier, interrupted run
+  fs::create_directories(s.dir);
+  const int rc = executor(s.argv, s.dir / "log.txt");
+  if (rc != 0)
+    return fmt::format("{} stage failed (exit status {}): {}\n{}", s.kind, rc, ExperimentCommandLine(s.argv),
+                       ReadFileTail(s.dir / "log.txt", 1500));
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  WriteJsonFile(s.dir / "stage.json", json{{"kind", s.kind},
+                                           {"key", s.key},
+                                           {"key_inputs", s.key_inputs},
+                                           {"command", ExperimentCommandLine(s.argv)},
+                                           {"seconds", seconds}});
+  return "";
+}
+
+}  // namespace
+
+fs::path StageLockFile(const ExperimentStage& stage) { return stage.dir.parent_path() / (stage.key + ".lock"); }
+
+std::string ExecuteStage(const ExperimentStage& s, const StageExecutor& executor) {
   try {
-    std::error_code ec;
-    fs::remove_all(s.dir, ec);  // an incomplete folder of an earlier, interrupted run
-    fs::create_directories(s.dir);
-    const int rc = executor(s.argv, s.dir / "log.txt");
-    if (rc != 0) {
-      error = fmt::format("{} stage failed (exit status {}): {}\n{}", s.kind, rc, ExperimentCommandLine(s.argv),
-                          ReadFileTail(s.dir / "log.txt", 1500));
-    } else {
-      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      WriteJsonFile(s.dir / "stage.json", json{{"kind", s.kind},
-                                               {"key", s.key},
-                                               {"key_inputs", s.key_inputs},
-                                               {"command", ExperimentCommandLine(s.argv)},
-                                               {"seconds", seconds}});
-    }
+    // Held while the stage is made: a second runner (local, or a Slurm job) on the
+    // same cache waits here, then finds the stage complete and makes nothing.
+    const FileLock lock(StageLockFile(s));
+    if (StageIsComplete(s)) return "";
+    return MakeStage(s, executor);
   } catch (const std::exception& e) {
-    error = fmt::format("{} stage: {}", s.kind, e.what());
+    return fmt::format("{} stage: {}", s.kind, e.what());
   }
-  return error;
 }
 
 bool StageIsComplete(const ExperimentStage& stage) {

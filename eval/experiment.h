@@ -180,7 +180,12 @@ StageExecutor SubprocessExecutor(const std::filesystem::path& program);
 // writes stage.json (kind, key, key inputs, command, seconds), which marks it
 // complete. Returns the error, empty on success. Every executor makes its stage
 // folders through this function (the Slurm jobs too, via `crease experiment stage`).
+// All of it happens under an exclusive lock of StageLockFile (flock): two runners on
+// one cache never make a stage twice. The second waits for the first, then finds the
+// stage complete and returns "" without running anything.
 std::string ExecuteStage(const ExperimentStage& stage, const StageExecutor& executor);
+// cache/<kind>/<key>.lock, beside the stage's folder.
+std::filesystem::path StageLockFile(const ExperimentStage& stage);
 
 struct ExperimentRunnerOptions {
   std::filesystem::path out;       // experiment results folder
@@ -190,7 +195,7 @@ struct ExperimentRunnerOptions {
   int jobs = 1;                    // stages run at once
   int shard = 0, num_shards = 1;   // run only this slice of the runs
   std::string program_version;     // enters every cache key (crease's version number)
-  std::string build_description;   // recorded only (version + git)
+  std::string build_description;   // recorded only (crease_version: version + git, fixed at build time)
   std::string command;             // the command line, recorded for the report
   std::function<void(const std::string&)> log;  // progress lines (may be empty)
   // Write out/stages.json, the experiment's stages and their folders, which

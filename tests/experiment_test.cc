@@ -511,5 +511,45 @@ TEST(Experiment, AnExclusiveCaptureRunsAlone) {
   fs::remove_all(root);
 }
 
+// Two runners on one cache (two `crease experiment run` with the local executor)
+// make every stage once: the second waits on the stage's lock, then finds it
+// complete (issue 20). Both collect the same results.
+TEST(Experiment, TwoRunnersOnOneCacheMakeEachStageOnce) {
+  const ExperimentConfig c = ParseExperimentConfig(kConfig, "toy.yaml");
+  const fs::path root = TempDir("two_runners");
+  ExperimentRunnerOptions o;
+  o.program_version = "test";
+  o.cache = root / "cache";
+  o.jobs = 2;
+  std::map<std::string, int> made;  // command → times its executor ran
+  std::mutex m;
+  const StageExecutor count = [&](const std::vector<std::string>& argv, const fs::path& log) {
+    std::string all;
+    for (const auto& x : argv) all += x + " ";
+    {
+      std::lock_guard<std::mutex> lock(m);
+      ++made[all];
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(3));  // let the runners overlap
+    return FakeExecute(argv, log);
+  };
+  ExperimentSummary first, second;
+  ExperimentRunnerOptions o1 = o, o2 = o;
+  o1.out = root / "first";
+  o2.out = root / "second";
+  std::thread t([&] { first = RunExperiment(c, o1, count); });
+  second = RunExperiment(c, o2, count);
+  t.join();
+  EXPECT_EQ(first.runs_ok, 8);
+  EXPECT_EQ(second.runs_ok, 8);
+  EXPECT_EQ(static_cast<int>(made.size()), first.stages);
+  for (const auto& [cmd, n] : made) EXPECT_EQ(n, 1) << cmd;
+  EXPECT_TRUE(fs::exists(o.cache / "rig"));
+  for (const auto& e : fs::directory_iterator(o1.out / "runs"))
+    EXPECT_EQ(RunJsonWithoutTimes(e.path()), RunJsonWithoutTimes(o2.out / "runs" / e.path().filename()))
+        << e.path().filename();
+  fs::remove_all(root);
+}
+
 }  // namespace
 }  // namespace crease

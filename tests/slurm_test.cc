@@ -11,9 +11,11 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include "core/error.h"
+#include "core/file_util.h"
 #include "core/json_io.h"
 
 namespace crease {
@@ -116,14 +118,15 @@ TEST(Slurm, TheJobScriptRunsThePlannedStageWithItsResources) {
 TEST(Slurm, SbatchArgumentsCarryTheDependenciesAndTheSiteOptions) {
   const auto stages = UniqueStages(ParseExperimentConfig(kConfig, "toy.yaml"), "/c");
   const ExperimentStage& capture = Kind(stages, "capture");
-  const auto a = SbatchArguments(capture, {"11", "12"}, SplitSlurmArgs("  --partition=short\t--qos=normal "));
+  const auto a = SbatchArguments(SlurmJobDir(capture) / "job.sh", {"11", "12_3"},
+                                 SplitSlurmArgs("  --partition=short\t--qos=normal "));
   EXPECT_EQ(a.front(), "--parsable");
-  EXPECT_TRUE(Has(a, "--dependency=afterok:11:12"));
+  EXPECT_TRUE(Has(a, "--dependency=afterok:11:12_3"));
   EXPECT_TRUE(Has(a, "--kill-on-invalid-dep=yes"));
   EXPECT_TRUE(Has(a, "--partition=short"));
   EXPECT_TRUE(Has(a, "--qos=normal"));
   EXPECT_EQ(a.back(), (SlurmJobDir(capture) / "job.sh").string());
-  const auto rig = SbatchArguments(Kind(stages, "rig"), {}, {});
+  const auto rig = SbatchArguments(SlurmJobDir(Kind(stages, "rig")) / "job.sh", {}, {});
   EXPECT_EQ(rig.size(), 2u);  // --parsable and the script: no dependency
 }
 
@@ -151,10 +154,10 @@ TEST(Slurm, ClaimsAreWaitedOnOnlyWhileTheirJobIsQueued) {
     return static_cast<size_t>(&Kind(stages, kind) - stages.data());
   };
   complete[at("rig")] = true;
-  claims[at("scans")] = SlurmClaim{"7", SlurmJobName(stages[at("scans")])};
+  claims[at("scans")] = SlurmClaim{"7", -1, SlurmJobName(stages[at("scans")]), "", ""};
   queue["7"] = {"RUNNING", SlurmJobName(stages[at("scans")]), ""};
-  claims[at("tracker")] = SlurmClaim{"8", SlurmJobName(stages[at("tracker")])};  // ended without finishing
-  claims[at("actor")] = SlurmClaim{"9", SlurmJobName(stages[at("actor")])};
+  claims[at("tracker")] = SlurmClaim{"8", -1, SlurmJobName(stages[at("tracker")]), "", ""};  // ended without finishing
+  claims[at("actor")] = SlurmClaim{"9", -1, SlurmJobName(stages[at("actor")]), "", ""};
   queue["9"] = {"PENDING", "someone-elses-job", ""};  // the id was reused (a new cluster)
   auto steps = PlanSlurmSteps(stages, complete, claims, queue);
   EXPECT_EQ(steps[at("rig")].action, SlurmAction::kDone);
@@ -166,7 +169,7 @@ TEST(Slurm, ClaimsAreWaitedOnOnlyWhileTheirJobIsQueued) {
   EXPECT_TRUE(steps[at("actor")].stale_job.empty());  // not ours: never cancelled
   // A queued job whose input must be made again waits on a job that is gone:
   // cancelled and submitted again.
-  claims[at("pairs")] = SlurmClaim{"10", SlurmJobName(stages[at("pairs")])};
+  claims[at("pairs")] = SlurmClaim{"10", -1, SlurmJobName(stages[at("pairs")]), "", ""};
   queue["10"] = {"PENDING", SlurmJobName(stages[at("pairs")]), ""};
   queue.erase("7");
   steps = PlanSlurmSteps(stages, complete, claims, queue);
@@ -210,16 +213,32 @@ std::vector<std::string> Lines(const fs::path& file) {
   return lines;
 }
 
+// A fresh folder ROOT with fake Slurm programs in ROOT/bin and runner options on
+// ROOT/cache and ROOT/out (stages.json recorded, as Slurm runs do).
+struct FakeCluster {
+  fs::path root;
+  SlurmOptions slurm;
+  ExperimentRunnerOptions options;
+};
+FakeCluster MakeFakeCluster(const std::string& name) {
+  FakeCluster f;
+  f.root = fs::temp_directory_path() / (name + "_" + std::to_string(getpid()));
+  fs::remove_all(f.root);
+  fs::create_directories(f.root / "bin");
+  f.slurm = FakeSlurm(f.root / "bin");
+  f.options.program_version = "test";
+  f.options.cache = f.root / "cache";
+  f.options.out = f.root / "out";
+  f.options.record_stages = true;
+  return f;
+}
+
 TEST(Slurm, TheBackendSubmitsWhatIsMissingWithAfterokOnItsInputsJobs) {
-  const fs::path root = fs::temp_directory_path() / ("crease_slurm_test_" + std::to_string(getpid()));
-  fs::remove_all(root);
-  fs::create_directories(root / "bin");
-  const SlurmOptions slurm = FakeSlurm(root / "bin");
-  ExperimentRunnerOptions o;
-  o.program_version = "test";
-  o.cache = root / "cache";
-  o.out = root / "out";
-  o.record_stages = true;
+  FakeCluster fake = MakeFakeCluster("crease_slurm_test");
+  const fs::path& root = fake.root;
+  SlurmOptions& slurm = fake.slurm;
+  slurm.arrays = false;  // one job per stage (--slurm-arrays off); arrays: the next test
+  const ExperimentRunnerOptions& o = fake.options;
   const ExperimentConfig c = ParseExperimentConfig(kConfig, "toy.yaml");
   const auto stages = UniqueStages(c, o.cache);
 
@@ -241,8 +260,13 @@ TEST(Slurm, TheBackendSubmitsWhatIsMissingWithAfterokOnItsInputsJobs) {
   for (size_t i = 0; i < stages.size(); ++i) {
     std::string deps;
     for (const auto& d : stages[i].depends) deps += ":" + job[d];
-    const std::string line = first[i];
+    const auto at = std::find_if(first.begin(), first.end(), [&](const std::string& l) {
+      return l.find(SlurmJobDir(stages[i]).string() + "/job.sh") != std::string::npos;
+    });
+    ASSERT_NE(at, first.end()) << stages[i].kind << " not submitted";
+    const std::string line = *at;
     EXPECT_EQ(line.substr(0, line.find(' ')), job[stages[i].key]);
+    for (const auto& d : stages[i].depends) EXPECT_LT(std::stoi(job[d]), std::stoi(job[stages[i].key])) << line;
     if (deps.empty()) {
       EXPECT_EQ(line.find("--dependency"), std::string::npos) << line;
     } else {
@@ -292,6 +316,128 @@ TEST(Slurm, TheBackendSubmitsWhatIsMissingWithAfterokOnItsInputsJobs) {
     ADD_FAILURE() << "no error without sbatch";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("no-sbatch"), std::string::npos) << e.what();
+  }
+  fs::remove_all(root);
+}
+
+// kConfig with two seeds: sweep points × seeds.
+std::string TwoSeeds() {
+  std::string yaml = kConfig;
+  yaml.replace(yaml.find("seeds: 1"), 8, "seeds: 2");
+  return yaml;
+}
+
+TEST(Slurm, AlikeStagesOfOneWaveAreGroupedIntoArrays) {
+  const auto stages = UniqueStages(ParseExperimentConfig(TwoSeeds(), "toy.yaml"), "/c");
+  const std::vector<SlurmStep> submit(stages.size());  // every stage missing
+  const auto groups = GroupSlurmSubmissions(stages, submit, /*arrays=*/true);
+  std::map<std::string, size_t> group_of;  // key → position of its group
+  size_t grouped = 0;
+  for (size_t g = 0; g < groups.size(); ++g) {
+    for (size_t i : groups[g]) {
+      const ExperimentStage& s = stages[i];
+      EXPECT_EQ(s.kind, stages[groups[g].front()].kind);
+      EXPECT_EQ(SlurmResourcesOf(s).cpus, SlurmResourcesOf(stages[groups[g].front()]).cpus);
+      for (const auto& dep : s.depends) {
+        ASSERT_TRUE(group_of.count(dep)) << s.kind << " before its input";
+        EXPECT_LT(group_of[dep], g) << s.kind << " in the group of its input";
+      }
+      group_of[s.key] = g;
+      ++grouped;
+    }
+  }
+  EXPECT_EQ(grouped, stages.size());
+  EXPECT_LT(groups.size(), stages.size());
+  // The 4 models (2 num_ferns × 2 seeds) are one array, the 2 scans another.
+  const auto size_of_kind = [&](const std::string& kind) { return groups[group_of[Kind(stages, kind).key]].size(); };
+  EXPECT_EQ(size_of_kind("model"), 4u);
+  EXPECT_EQ(size_of_kind("scans"), 2u);
+  // Off: one stage per sbatch; complete or claimed stages are not submitted.
+  EXPECT_EQ(GroupSlurmSubmissions(stages, submit, false).size(), stages.size());
+  std::vector<SlurmStep> some = submit;
+  some[0].action = SlurmAction::kDone;
+  some[1].action = SlurmAction::kWait;
+  size_t n = 0;
+  for (const auto& g : GroupSlurmSubmissions(stages, some, true)) n += g.size();
+  EXPECT_EQ(n, stages.size() - 2);
+}
+
+// The stages that read `key`, directly or not, and `key` itself.
+std::set<std::string> Downstream(const std::vector<ExperimentStage>& stages, const std::string& key) {
+  std::set<std::string> out = {key};
+  for (const auto& s : stages)
+    for (const auto& d : s.depends)
+      if (out.count(d)) out.insert(s.key);
+  return out;
+}
+
+TEST(Slurm, ArraysAreSubmittedOnceAndARerunResubmitsOnlyTheirFailedTasks) {
+  FakeCluster fake = MakeFakeCluster("crease_slurm_array_test");
+  const fs::path& root = fake.root;
+  const SlurmOptions& slurm = fake.slurm;
+  const ExperimentRunnerOptions& o = fake.options;
+  const ExperimentConfig c = ParseExperimentConfig(TwoSeeds(), "toy.yaml");
+  const auto stages = UniqueStages(c, o.cache);
+  RunExperiments({ExperimentJob{c, o}}, SlurmBackend(slurm));
+  const auto calls = Lines(root / "bin" / "sbatch.log");
+  EXPECT_EQ(calls.size(), GroupSlurmSubmissions(stages, std::vector<SlurmStep>(stages.size()), true).size());
+  EXPECT_LT(calls.size(), stages.size());
+  // The models: one array, task i making model i, its script listing their plans.
+  std::vector<ExperimentStage> models;
+  for (const auto& s : stages)
+    if (s.kind == "model") models.push_back(s);
+  ASSERT_EQ(models.size(), 4u);
+  const auto claim0 = ReadSlurmClaim(models[0]);
+  ASSERT_TRUE(claim0);
+  EXPECT_EQ(claim0->job_name, SlurmArrayName(models));
+  for (int t = 0; t < 4; ++t) {
+    const auto claim = ReadSlurmClaim(models[t]);
+    EXPECT_EQ(claim->job_id, claim0->job_id);
+    EXPECT_EQ(claim->task_id, t);
+    EXPECT_EQ(claim->Id(), claim0->job_id + "_" + std::to_string(t));
+    EXPECT_EQ(claim->output, (SlurmArrayDir(models) / ("slurm-" + claim->Id() + ".out")).string());
+  }
+  const std::string script = ReadFileToString(SlurmArrayDir(models) / "job.sh");
+  EXPECT_NE(script.find("#SBATCH --array=0-3\n"), std::string::npos) << script;
+  EXPECT_NE(script.find("experiment stage \"${plans[$SLURM_ARRAY_TASK_ID]}\"\n"), std::string::npos) << script;
+  for (const auto& m : models) EXPECT_NE(script.find((SlurmJobDir(m) / "plan.json").string()), std::string::npos);
+  // The array waits on the pairs array (the union of its tasks' inputs), by its job id.
+  const std::string pairs_job = ReadSlurmClaim(Kind(stages, "pairs"))->job_id;
+  for (const auto& line : calls) {
+    if (line.find(SlurmArrayDir(models).string()) != std::string::npos) {
+      EXPECT_NE(line.find("--dependency=afterok:" + pairs_job + " "), std::string::npos) << line;
+    }
+  }
+  // A task still running shows in status by its task id; an ended job's state is kept
+  // in its claim (the runner saw it end), which status shows once Slurm has forgotten it.
+  EXPECT_EQ(ReadSlurmClaim(Kind(stages, "rig"))->final_state, "CANCELLED");
+  std::ofstream(root / "bin" / "queue") << claim0->job_id << "_2|RUNNING|" << SlurmArrayName(models) << "|None\n";
+  std::ofstream(root / "bin" / "scontrol") << "#!/bin/sh\nexit 1\n";  // Slurm forgot every ended job
+  const auto status = ExperimentStageStatus(o.out, slurm);
+  for (size_t i = 0; i < stages.size(); ++i) {
+    if (stages[i].key == models[2].key) {
+      EXPECT_EQ(status[i].state, "running");
+      EXPECT_EQ(status[i].job_id, claim0->job_id + "_2");
+    } else if (stages[i].kind == "rig") {
+      EXPECT_EQ(status[i].state, "failed");
+      EXPECT_EQ(status[i].job_state, "CANCELLED");
+    }
+  }
+  // Every stage made but model task 1 and what reads it: the rerun submits those only.
+  const std::set<std::string> failed = Downstream(stages, models[1].key);
+  for (const auto& s : stages) {
+    if (!failed.count(s.key)) {
+      ASSERT_EQ(ExecuteStage(s, [](const auto&, const auto&) { return 0; }), "");
+    }
+  }
+  RunExperiments({ExperimentJob{c, o}}, SlurmBackend(slurm));
+  const auto all = Lines(root / "bin" / "sbatch.log");
+  ASSERT_EQ(all.size(), calls.size() + failed.size());  // one of each kind: single jobs
+  for (size_t i = calls.size(); i < all.size(); ++i) {
+    bool names_a_failed_stage = false;
+    for (const auto& s : stages)
+      if (all[i].find(SlurmJobDir(s).string() + "/job.sh") != std::string::npos) names_a_failed_stage = failed.count(s.key);
+    EXPECT_TRUE(names_a_failed_stage) << all[i];
   }
   fs::remove_all(root);
 }

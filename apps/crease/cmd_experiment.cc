@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 
 #include "apps/crease/commands.h"
+#include "crease_build_version.h"  // generated: CREASE_BUILD_DESCRIPTION
 #include "core/error.h"
 #include "core/file_util.h"
 #include "core/json_io.h"
@@ -70,25 +71,13 @@ fs::path SelfPath() {
   return p;
 }
 
-std::string GitDescription() {
-  const std::string cmd = fmt::format("git -C '{}' rev-parse --short HEAD 2>/dev/null", SourceDir().string());
-  FILE* p = popen(cmd.c_str(), "r");
-  if (!p) return "";
-  char buf[64] = {0};
-  std::string out;
-  if (std::fgets(buf, sizeof buf, p)) out = buf;
-  pclose(p);
-  while (!out.empty() && (out.back() == '\n' || out.back() == '\r')) out.pop_back();
-  return out;
-}
-
 }  // namespace
 
 namespace {
 
 // The options of `crease experiment run`.
 struct RunArgs {
-  std::string name, profile, out, cache, shard, executor = "local", slurm_args;
+  std::string name, profile, out, cache, shard, executor = "local", slurm_args, slurm_arrays = "on";
   int seeds = 0, jobs = 1;
   double slurm_poll = 5.0;
   bool dry_run = false;
@@ -113,8 +102,7 @@ ExperimentRunnerOptions RunnerOptions(const RunArgs& a) {
   o.out = fs::absolute(a.out.empty() ? fs::path("out/experiments") : fs::path(a.out));
   o.cache = fs::absolute(a.cache.empty() ? o.out / "cache" : fs::path(a.cache));
   o.program_version = CREASE_VERSION;
-  const std::string git = GitDescription();
-  o.build_description = git.empty() ? CREASE_VERSION : fmt::format("{} (git {})", CREASE_VERSION, git);
+  o.build_description = CREASE_BUILD_DESCRIPTION;  // fixed when this program was built
   o.log = [](const std::string& line) {
     std::printf("%s\n", line.c_str());
     std::fflush(stdout);
@@ -145,6 +133,7 @@ StageBackend BackendOf(const RunArgs& a) {
     so.program = SelfPath();
     so.site_args = SplitSlurmArgs(a.slurm_args);
     so.poll_seconds = a.slurm_poll;
+    so.arrays = a.slurm_arrays == "on";
     return SlurmBackend(so);
   }
   throw Error(fmt::format("--executor '{}': expected local or slurm", a.executor));
@@ -154,6 +143,8 @@ void RunExperimentCommand(const RunArgs& a) {
   Require(a.executor == "local" || a.executor == "slurm",
           fmt::format("--executor '{}': expected local or slurm", a.executor));
   Require(a.executor == "slurm" || a.slurm_args.empty(), "--slurm-args needs --executor slurm");
+  Require(a.slurm_arrays == "on" || a.slurm_arrays == "off",
+          fmt::format("--slurm-arrays '{}': expected on or off", a.slurm_arrays));
   std::vector<fs::path> configs;
   if (a.name == "all") {
     configs = ListConfigs();
@@ -206,11 +197,15 @@ void AddRunCommand(CLI::App* exp) {
   cmd->add_option("--out,-o", a.out, "Results folder (default out/experiments; one subfolder per experiment)");
   cmd->add_option("--cache", a.cache, "Stage cache (default: <out>/cache, shared by the experiments)");
   cmd->add_option("--executor", a.executor,
-                  "local (stages run here, --jobs at a time) or slurm (each missing stage a batch job with afterok "
-                  "dependencies; the cache and the crease program on a folder every node sees)")
+                  "local (stages run here, --jobs at a time) or slurm (each missing stage a batch job or array task with "
+                  "afterok dependencies; the cache and the crease program on a folder every node sees)")
       ->capture_default_str();
   cmd->add_option("--slurm-args", a.slurm_args,
                   "Site options for every sbatch, e.g. \"--partition=short --account=lab --qos=normal\"");
+  cmd->add_option("--slurm-arrays", a.slurm_arrays,
+                  "on: alike stages (one kind and resources, the same dependency wave: sweep points × seeds) are "
+                  "submitted as one job array; off: one job per stage")
+      ->capture_default_str();
   cmd->add_option("--slurm-poll", a.slurm_poll, "Seconds between the runner's squeue polls (slurm executor)")
       ->capture_default_str();
   cmd->add_flag("--dry-run", a.dry_run, "Print the runs and the commands of their stages, run nothing");
