@@ -8,6 +8,7 @@
 #include <numbers>
 #include <string>
 
+#include "core/options.h"
 #include "core/rng.h"
 #include "pipeline/capture/landmark_fit.h"
 #include "synth/procedural_rig.h"
@@ -67,7 +68,7 @@ const Sequence& Performance() {
 void BM_FitTrackedFrame(benchmark::State& state, const std::string& solver) {
   const Sequence& seq = Performance();
   LandmarkFitOptions o;
-  o.fit_linear_solver = solver;
+  o.fit_linear_solver = FromString<FitLinearSolver>(solver, "solver");
   LandmarkRigFitter fitter(Rig(), Intrinsics(), o);
   fitter.SetIdentity(seq.identity);
   fitter.Fit(seq.frames[0]);

@@ -1,9 +1,12 @@
 #include "core/options.h"
 
+#include <algorithm>
 #include <cmath>
+#include <map>
 #include <limits>
 #include <set>
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <nlohmann/json.hpp>
 #include <yaml-cpp/yaml.h>
 
@@ -15,23 +18,23 @@ namespace {
 
 using nlohmann::json;
 
-// Collects the field names, for the unknown-key check and its message.
+// Collects the keys, for the unknown-key check and its message.
 class NameCollector final : public OptionVisitor {
  public:
   std::vector<std::string> names;
-  void Field(const char* n, bool&) override { names.emplace_back(n); }
-  void Field(const char* n, int&) override { names.emplace_back(n); }
-  void Field(const char* n, int64_t&) override { names.emplace_back(n); }
-  void Field(const char* n, uint64_t&) override { names.emplace_back(n); }
-  void Field(const char* n, float&) override { names.emplace_back(n); }
-  void Field(const char* n, double&) override { names.emplace_back(n); }
-  void Field(const char* n, std::string&) override { names.emplace_back(n); }
-  void Field(const char* n, std::vector<int>&) override { names.emplace_back(n); }
-  void Field(const char* n, std::vector<double>&) override { names.emplace_back(n); }
-  void Field(const char* n, std::vector<std::string>&) override { names.emplace_back(n); }
+  void Field(const char* n, bool&) override { names.push_back(Key(n)); }
+  void Field(const char* n, int&) override { names.push_back(Key(n)); }
+  void Field(const char* n, int64_t&) override { names.push_back(Key(n)); }
+  void Field(const char* n, uint64_t&) override { names.push_back(Key(n)); }
+  void Field(const char* n, float&) override { names.push_back(Key(n)); }
+  void Field(const char* n, double&) override { names.push_back(Key(n)); }
+  void Field(const char* n, std::string&) override { names.push_back(Key(n)); }
+  void Field(const char* n, std::vector<int>&) override { names.push_back(Key(n)); }
+  void Field(const char* n, std::vector<double>&) override { names.push_back(Key(n)); }
+  void Field(const char* n, std::vector<std::string>&) override { names.push_back(Key(n)); }
 };
 
-// The names of `visit`'s fields; two fields under one name (nested option structs
+// The keys of `visit`'s fields; two fields under one key (two nested option structs
 // that both register it, so that one key would set both) are an error (issue 18).
 std::vector<std::string> UniqueFieldNames(void* options, void (*visit)(void*, OptionVisitor&),
                                           const std::string& what) {
@@ -42,6 +45,100 @@ std::vector<std::string> UniqueFieldNames(void* options, void (*visit)(void*, Op
     Require(seen.insert(n).second,
             fmt::format("{}: two options register the key '{}' (a crease bug: one key would set both)", what, n));
   return c.names;
+}
+
+// Keys renamed when options got sections (issue 18): old flat key → the end of its
+// new key. A field that only moved into a section, its name unchanged
+// (`lk_window` → `refinement.lk_window`), needs no entry.
+const std::map<std::string, std::string>& RenamedOptionKeys() {
+  static const std::map<std::string, std::string> renamed = {
+      {"pca_dimensions", "pca.dimensions"},
+      {"patch_size", "patch.size"},
+      {"patch_density", "patch.density"},
+      {"patch_max_outside_fraction", "patch.max_outside_fraction"},
+      {"fern_depth", "ferns.depth"},
+      {"fern_seed", "ferns.seed"},
+      {"fern_threshold_rule", "ferns.threshold_rule"},
+      {"fern_threshold_range", "ferns.threshold_range"},
+      {"fern_pair_selection", "ferns.pair_selection"},
+      {"fern_texture_normalization", "ferns.texture_normalization"},
+      {"fit_seed", "fit.seed"},
+      {"fit_expression_prior_weight", "fit.expression_prior_weight"},
+      {"fit_temporal_expression_weight", "fit.temporal_expression_weight"},
+      {"fit_temporal_rotation_weight", "fit.temporal_rotation_weight"},
+      {"fit_temporal_translation_weight", "fit.temporal_translation_weight"},
+      {"fit_temporal_depth_weight", "fit.temporal_depth_weight"},
+      {"fit_identity_prior_weight", "fit.identity_prior_weight"},
+      {"fit_max_iterations", "fit.max_iterations"},
+      {"fit_initial_max_iterations", "fit.initial_max_iterations"},
+      {"fit_function_tolerance", "fit.function_tolerance"},
+      {"fit_linear_solver", "fit.linear_solver"},
+      {"refine_expression_prior_weight", "refinement.expression_prior_weight"},
+      {"fill_resolution", "fill.resolution"},
+      {"fill_boundary", "fill.boundary"},
+      {"fill_smoothing_sweeps", "fill.smoothing_sweeps"},
+      {"fill_band_texels", "fill.band_texels"},
+      {"meso_small_kernel", "mesoscopic.small_kernel"},
+      {"meso_large_kernel", "mesoscopic.large_kernel"},
+      {"meso_scale", "mesoscopic.scale"},
+      {"meso_reference_resolution", "mesoscopic.reference_resolution"},
+      {"hifi_mesh_resolution", "hifi.resolution"},
+      {"appearance_ceiling", "appearance.enabled"},
+      {"appearance_window", "appearance.window"},
+      {"appearance_window_step", "appearance.window_step"},
+      {"appearance_stride", "appearance.stride"},
+      {"appearance_ridge", "appearance.ridge"},
+      {"appearance_reference_frames", "appearance.reference_frames"},
+      {"appearance_block", "appearance.block"},
+  };
+  return renamed;
+}
+
+bool EndsWithKey(const std::string& key, const std::string& tail) {
+  return key == tail || (key.size() > tail.size() && key.ends_with(tail) && key[key.size() - tail.size() - 1] == '.');
+}
+
+// Whether `key` is what renamed key `tail` ("section.leaf") became: a key ending in
+// it, or "leaf" alone in the section's own struct (AppearanceCeilingOptions' `enabled`).
+bool IsRenamedTo(const std::string& key, const std::string& tail) {
+  return EndsWithKey(key, tail) || key == tail.substr(tail.find('.') + 1);
+}
+
+// The known keys an old flat key became: those ending in its renamed tail or in
+// the old key itself (a field moved into a section).
+std::vector<std::string> NewKeysOf(const std::string& old_key, const std::vector<std::string>& known) {
+  const auto it = RenamedOptionKeys().find(old_key);
+  std::vector<std::string> out;
+  for (const auto& k : known)
+    if ((it != RenamedOptionKeys().end() && IsRenamedTo(k, it->second)) || EndsWithKey(k, old_key)) out.push_back(k);
+  return out;
+}
+
+[[noreturn]] void ThrowUnknownKey(const std::string& key, const std::vector<std::string>& known,
+                                  const std::string& what) {
+  const std::vector<std::string> now = NewKeysOf(key, known);
+  if (!now.empty())
+    throw Error(fmt::format("{}: unknown option '{}': it is now '{}'", what, key, fmt::join(now, "' or '")));
+  throw Error(fmt::format("{}: unknown option '{}' (known options: {})", what, key, fmt::join(known, ", ")));
+}
+
+// `j`'s sections (nested objects) as dotted keys into `out`; a key set twice throws.
+void FlattenInto(const json& j, const std::string& prefix, const std::string& what, json* out) {
+  for (const auto& [k, v] : j.items()) {
+    const std::string key = prefix + k;
+    if (v.is_object()) {
+      FlattenInto(v, key + ".", what, out);
+      continue;
+    }
+    Require(!out->contains(key), fmt::format("{}: option '{}' is set twice (nested and dotted?)", what, key));
+    (*out)[key] = v;
+  }
+}
+
+json Flatten(const json& j, const std::string& what) {
+  json out = json::object();
+  FlattenInto(j, "", what, &out);
+  return out;
 }
 
 class JsonReader final : public OptionVisitor {
@@ -78,15 +175,25 @@ class JsonReader final : public OptionVisitor {
   void Field(const char* n, std::vector<double>& v) override { List(n, v); }
   void Field(const char* n, std::vector<std::string>& v) override { List(n, v); }
 
+ protected:
+  void EnumField(const char* n, std::string& v, const std::vector<std::string>& allowed) override {
+    const json* x = Find(n);
+    if (!x) return;
+    const bool ok = x->is_string() && std::find(allowed.begin(), allowed.end(), x->get<std::string>()) != allowed.end();
+    Expect(ok, n, fmt::format("one of: {}", fmt::join(allowed, ", ")).c_str());
+    v = x->get<std::string>();
+  }
+
  private:
+  // `j_` has dotted keys (Flatten); `n` is a field of the current section.
   const json* Find(const char* n) const {
-    auto it = j_.find(n);
+    auto it = j_.find(Key(n));
     return it == j_.end() ? nullptr : &*it;
   }
   void Expect(bool ok, const char* n, const char* expected) const {
     if (!ok) {
-      throw Error(fmt::format("{}: option '{}' must be {}, got {}", what_, n, expected,
-                              j_.at(n).dump()));
+      throw Error(fmt::format("{}: option '{}' must be {}, got {}", what_, Key(n), expected,
+                              j_.at(Key(n)).dump()));
     }
   }
   double Number(const char* n, const json& x) const {
@@ -142,36 +249,46 @@ class JsonReader final : public OptionVisitor {
 
 class JsonWriter final : public OptionVisitor {
  public:
-  json j = json::object();
-  void Field(const char* n, bool& v) override { j[n] = v; }
-  void Field(const char* n, int& v) override { j[n] = v; }
-  void Field(const char* n, int64_t& v) override { j[n] = v; }
-  void Field(const char* n, uint64_t& v) override { j[n] = v; }
-  void Field(const char* n, float& v) override { j[n] = v; }
-  void Field(const char* n, double& v) override { j[n] = v; }
-  void Field(const char* n, std::string& v) override { j[n] = v; }
-  void Field(const char* n, std::vector<int>& v) override { j[n] = v; }
-  void Field(const char* n, std::vector<double>& v) override { j[n] = v; }
-  void Field(const char* n, std::vector<std::string>& v) override { j[n] = v; }
+  json j = json::object();  // dotted keys
+  void Field(const char* n, bool& v) override { j[Key(n)] = v; }
+  void Field(const char* n, int& v) override { j[Key(n)] = v; }
+  void Field(const char* n, int64_t& v) override { j[Key(n)] = v; }
+  void Field(const char* n, uint64_t& v) override { j[Key(n)] = v; }
+  void Field(const char* n, float& v) override { j[Key(n)] = v; }
+  void Field(const char* n, double& v) override { j[Key(n)] = v; }
+  void Field(const char* n, std::string& v) override { j[Key(n)] = v; }
+  void Field(const char* n, std::vector<int>& v) override { j[Key(n)] = v; }
+  void Field(const char* n, std::vector<double>& v) override { j[Key(n)] = v; }
+  void Field(const char* n, std::vector<std::string>& v) override { j[Key(n)] = v; }
 };
 
-void SetFromJson(const json& j, const std::string& what, void* options,
+void SetFromJson(const json& nested, const std::string& what, void* options,
                  void (*visit)(void*, OptionVisitor&)) {
-  if (!j.is_object()) {
+  if (!nested.is_object()) {
     throw Error(fmt::format("{}: expected a mapping of option names to values, got {}", what,
-                            j.type_name()));
+                            nested.type_name()));
   }
+  const json j = Flatten(nested, what);
   const std::vector<std::string> names = UniqueFieldNames(options, visit, what);
   const std::set<std::string> known(names.begin(), names.end());
-  for (auto it = j.begin(); it != j.end(); ++it) {
-    if (!known.count(it.key())) {
-      std::string list;
-      for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
-      throw Error(fmt::format("{}: unknown option '{}' (known options: {})", what, it.key(), list));
-    }
-  }
+  for (auto it = j.begin(); it != j.end(); ++it)
+    if (!known.count(it.key())) ThrowUnknownKey(it.key(), names, what);
   JsonReader reader(j, what);
   visit(options, reader);
+}
+
+// Parses JSON text; a key twice in one object throws Error naming it (nlohmann
+// keeps the last silently).
+json ParseJsonOnceEach(const std::string& text, const std::string& what) {
+  std::vector<std::set<std::string>> open;  // keys seen in each open object
+  const json::parser_callback_t check = [&](int, json::parse_event_t event, json& parsed) {
+    if (event == json::parse_event_t::object_start) open.emplace_back();
+    if (event == json::parse_event_t::object_end) open.pop_back();
+    if (event == json::parse_event_t::key && !open.back().insert(parsed.get<std::string>()).second)
+      throw Error(fmt::format("{}: option '{}' is set twice", what, parsed.get<std::string>()));
+    return true;
+  };
+  return json::parse(text, check);
 }
 
 // The most nodes a YAML document may expand to, an alias counting again at every
@@ -223,7 +340,12 @@ Json YamlToJson(const YAML::Node& node, const std::string& what, size_t* count) 
           throw Error(fmt::format("{}:{}:{}: a key must be a plain name, not a list or mapping", what,
                                   kv.first.Mark().line + 1, kv.first.Mark().column + 1));
         }
-        o[kv.first.as<std::string>()] = YamlToJson<Json>(kv.second, what, count);
+        const std::string key = kv.first.as<std::string>();
+        if (o.contains(key)) {
+          throw Error(fmt::format("{}:{}:{}: key '{}' is set twice", what, kv.first.Mark().line + 1,
+                                  kv.first.Mark().column + 1, key));
+        }
+        o[key] = YamlToJson<Json>(kv.second, what, count);
       }
       return o;
     }
@@ -259,7 +381,7 @@ void SetFieldsFromJsonText(const std::string& json_text, const std::string& what
                            void (*visit)(void*, OptionVisitor&)) {
   json j;
   try {
-    j = json::parse(json_text);
+    j = ParseJsonOnceEach(json_text, what);
   } catch (const json::exception& e) {  // parse_error, or out_of_range for 1e400 (issue 19)
     throw Error(fmt::format("{}: malformed JSON: {}", what, e.what()));
   }
@@ -273,8 +395,24 @@ void SetFieldsFromYamlText(const std::string& yaml_text, const std::string& what
   SetFromJson(j, what, options, visit);
 }
 
+std::string UpgradeOldKeys(const std::string& json_text, const std::string& what,
+                           const std::vector<std::string>& known) {
+  const std::set<std::string> current(known.begin(), known.end());
+  json out = json::object();
+  const json stored = Flatten(ParseJsonOnceEach(json_text, what), what);
+  for (const auto& [k, v] : stored.items()) {
+    const std::vector<std::string> now = current.count(k) ? std::vector<std::string>{} : NewKeysOf(k, known);
+    out[now.size() == 1 ? now[0] : k] = v;
+  }
+  return out.dump();
+}
+
 std::vector<std::string> FieldNames(void* options, void (*visit)(void*, OptionVisitor&)) {
   return UniqueFieldNames(options, visit, "options");
+}
+
+std::string FlattenOptionKeysText(const std::string& json_text, const std::string& what) {
+  return Flatten(json::parse(json_text), what).dump();
 }
 
 std::string YamlTextToJsonText(const std::string& yaml_text, const std::string& what) {
@@ -291,6 +429,10 @@ std::string FieldsToJsonText(void* options, void (*visit)(void*, OptionVisitor&)
 
 std::string YamlToJsonText(const std::string& yaml_text, const std::string& what) {
   return internal::YamlTextToJsonText(yaml_text, what);
+}
+
+std::string FlattenOptionKeys(const std::string& json_text, const std::string& what) {
+  return internal::FlattenOptionKeysText(json_text, what);
 }
 
 namespace {
@@ -310,9 +452,13 @@ void CheckOneOf(const char* owner, const char* field, const std::string& value,
   for (const auto& a : allowed) {
     if (a == value) return;
   }
-  std::string list;
-  for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
-  throw Error(fmt::format("{}.{} = '{}' must be one of: {}", owner, field, value, list));
+  internal::ThrowNotOneOf(fmt::format("{}.{}", owner, field), value, allowed);
 }
+
+namespace internal {
+void ThrowNotOneOf(const std::string& what, const std::string& text, const std::vector<std::string>& allowed) {
+  throw Error(fmt::format("{} = '{}' must be one of: {}", what, text, fmt::join(allowed, ", ")));
+}
+}  // namespace internal
 
 }  // namespace crease

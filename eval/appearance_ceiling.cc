@@ -14,13 +14,13 @@
 namespace crease {
 
 void AppearanceCeilingOptions::VisitFields(OptionVisitor& v) {
-  v.Field("appearance_ceiling", enabled);
-  v.Field("appearance_window", window);
-  v.Field("appearance_window_step", window_step);
-  v.Field("appearance_stride", stride);
-  v.Field("appearance_ridge", ridge);
-  v.Field("appearance_reference_frames", reference_frames);
-  v.Field("appearance_block", block);
+  v.Field("enabled", enabled);
+  v.Field("window", window);
+  v.Field("window_step", window_step);
+  v.Field("stride", stride);
+  v.Field("ridge", ridge);
+  v.Field("reference_frames", reference_frames);
+  v.Field("block", block);
 }
 
 void AppearanceCeilingOptions::Check() const {

@@ -44,7 +44,7 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 void CaptureEvalOptions::VisitFields(OptionVisitor& v) {
-  appearance.VisitFields(v);
+  v.Section("appearance", appearance);
   v.Field("surface_every", surface_every);
   v.Field("band_mm", band_mm);
   v.Field("detail_truth", detail_truth);
@@ -391,11 +391,15 @@ class LkFromTruthMeter {
   // defaults for what they lack.
   explicit LkFromTruthMeter(const json& capture_options) {
     const json o = capture_options.is_object() ? capture_options : json::object();
-    lk_.lk_window = o.value("lk_window", lk_.lk_window);
-    lk_.lk_pyramid_levels = o.value("lk_pyramid_levels", lk_.lk_pyramid_levels);
-    lk_.lk_max_iterations = o.value("lk_max_iterations", lk_.lk_max_iterations);
-    lk_.lk_epsilon_px = o.value("lk_epsilon_px", lk_.lk_epsilon_px);
-    lk_.lk_min_eigenvalue = o.value("lk_min_eigenvalue", lk_.lk_min_eigenvalue);
+    // Section `refinement` of CaptureOptions (flat in captures from before option sections).
+    const auto get = [&o](const char* key, auto fallback) {
+      return o.value(std::string("refinement.") + key, o.value(key, fallback));
+    };
+    lk_.lk_window = get("lk_window", lk_.lk_window);
+    lk_.lk_pyramid_levels = get("lk_pyramid_levels", lk_.lk_pyramid_levels);
+    lk_.lk_max_iterations = get("lk_max_iterations", lk_.lk_max_iterations);
+    lk_.lk_epsilon_px = get("lk_epsilon_px", lk_.lk_epsilon_px);
+    lk_.lk_min_eigenvalue = get("lk_min_eigenvalue", lk_.lk_min_eigenvalue);
   }
   // Frame `index` (8-bit gray) with its truth; `flow_vertex`: the capture's flow points.
   void Add(int index, const cv::Mat& gray8, const FrameTruth& truth, const std::vector<int>& flow_vertex) {
@@ -469,7 +473,9 @@ FrameTextureOptions CaptureTextureOptions(const json& capture_json, const std::s
   const json o = capture_json.value("options", json::object());
   json known = json::object();
   for (const std::string& key : OptionFieldNames<FrameTextureOptions>()) {
-    if (o.contains(key)) known[key] = o[key];
+    // CaptureOptions' section `texture` (flat in captures from before option sections).
+    const std::string stored = o.contains("texture." + key) ? "texture." + key : key;
+    if (o.contains(stored)) known[key] = o[stored];
   }
   FrameTextureOptions t;
   SetOptionsFromJson(known.dump(), what, &t);

@@ -145,18 +145,24 @@ const SectionInfo& FindSection(const std::string& name, const std::string& what)
 std::pair<std::string, std::string> SplitKey(const std::string& key, const std::string& what) {
   const auto dot = key.find('.');
   if (dot == std::string::npos || dot == 0 || dot + 1 == key.size())
-    throw Error(fmt::format("{}: '{}' must be SECTION.FIELD (e.g. training.num_ferns)", what, key));
+    throw Error(fmt::format("{}: '{}' must be SECTION.FIELD (e.g. training.ferns.num_ferns)", what, key));
   return {key.substr(0, dot), key.substr(dot + 1)};
 }
 
-// Sets section.field = value on `config` and validates the section.
+// A section's options with dotted keys (core/options.h: the canonical form that
+// cache keys and --set take); nested sections and keys set twice are resolved here.
+json FlatOptions(const json& j, const std::string& what) { return json::parse(FlattenOptionKeys(j.dump(), what)); }
+
+// Sets section.field = value on `config` and validates the section. The field may
+// be dotted (capture.refinement.lk_window) and the value a mapping of a section.
 void SetDotted(ExperimentConfig* config, const std::string& key, const json& value, const std::string& what) {
   const auto [section, field] = SplitKey(key, what);
   const SectionInfo& info = FindSection(section, fmt::format("{} ('{}')", what, key));
   json& obj = config->sections[section];
   if (!obj.is_object()) obj = json::object();
   json trial = obj;
-  trial[field] = value;
+  const json flat = FlatOptions(json{{field, value}}, what);
+  for (const auto& [k, v] : flat.items()) trial[k] = v;
   info.validate(trial, fmt::format("{} ('{}')", what, key));
   obj = std::move(trial);
 }
@@ -331,7 +337,7 @@ ExperimentConfig ParseExperimentConfigImpl(const std::string& yaml_text, const s
                                 "table, figures, claims, or a section: {})",
                                 what, key, Join(ExperimentSections(), ", ")));
       Require(value.is_object() || value.is_null(), fmt::format("{}: section '{}' must be a mapping", what, key));
-      const json obj = value.is_null() ? json::object() : value;
+      const json obj = value.is_null() ? json::object() : FlatOptions(value, fmt::format("{} (section {})", what, key));
       FindSection(key, what).validate(obj, fmt::format("{} (section {})", what, key));
       c.sections[key] = obj;
     }

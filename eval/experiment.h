@@ -120,7 +120,7 @@ ExperimentConfig ApplyProfile(const ExperimentConfig& config, const std::string&
 
 // One run: a sweep point and a seed.
 struct ExperimentRun {
-  std::string id;              // e.g. "training.num_ferns=80_seed1"
+  std::string id;              // e.g. "training.ferns.num_ferns=80_seed1"
   int seed = 1;
   nlohmann::json point;        // {section.field: value}
   ExperimentConfig resolved;   // config with the point applied

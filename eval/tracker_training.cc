@@ -134,7 +134,7 @@ void TrackerTrainingOptions::VisitFields(OptionVisitor& v) {
   v.Field("actor_resolution", actor_resolution);
   v.Field("test_fraction", test_fraction);
   v.Field("max_detector_tests", max_detector_tests);
-  regressor.VisitFields(v);
+  v.Section("regressor", regressor);
 }
 
 void TrackerTrainingOptions::Check() const {

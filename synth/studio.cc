@@ -109,8 +109,7 @@ void StudioOptions::VisitFields(OptionVisitor& v) {
   v.Field("shutter", shutter);
   v.Field("occluder", occluder);
   v.Field("seed", seed);
-  // Sensor options are flattened with a prefix-free naming of their own fields.
-  sensor.VisitFields(v);
+  v.Section("sensor", sensor);
 }
 
 void StudioOptions::Check() const {

@@ -5,8 +5,8 @@ namespace crease {
 void StudioRigOptions::VisitFields(OptionVisitor& v) {
   v.Field("head", head);
   v.Field("ict_rig", ict_rig);
-  ict.VisitFields(v);
-  procedural.VisitFields(v);
+  v.Section("ict", ict);
+  v.Section("procedural", procedural);
 }
 
 void StudioRigOptions::Check() const {

@@ -78,7 +78,7 @@ bad "ground-truth-prior needs a dataset" "needs a crease sequence dataset" "$cre
 
 # Training (Sec. 4) on a tiny scan set: one old actor at 256² maps, one camera.
 ok "synth scans" "$crease" synth scans --rig "$tmp/head.crig" --actors 1 --seed 11 --cameras 2 --size 200x150 --samples 1 -e browInnerUp=1,browOuterUp=1 --set resolution=256 --set surface_min_vertices=1000 --set age_min=1 -o "$tmp/scans"
-ok "train" "$crease" train --scans "$tmp/scans" --out "$tmp/model.cdm" --set map_resolution=256 --set operator_resolution=96 --set patch_size=8 --set pca_dimensions=6 --set num_ferns=20 --set num_sampled_pixels=20 --set max_fit_vertices=300
+ok "train" "$crease" train --scans "$tmp/scans" --out "$tmp/model.cdm" --set detail.map_resolution=256 --set detail.operator_resolution=96 --set patch.size=8 --set pca.dimensions=6 --set ferns.num_ferns=20 --set ferns.num_sampled_pixels=20 --set fit.max_fit_vertices=300
 grep -q "wrinkle band" "$tmp/model_report/report.md" || { echo "FAIL: training report lacks the detail-extraction accuracy"; fails=$((fails+1)); }
 [ -s "$tmp/model_report/eigen_patches.png" ] || { echo "FAIL: training wrote no eigen-patch picture"; fails=$((fails+1)); }
 ok "model info" "$crease" model info "$tmp/model.cdm"
@@ -86,11 +86,15 @@ grep -q "K = 20" "$tmp/out" || { echo "FAIL: model info does not show K"; fails=
 bad "model info on a rig" "not a crease detail model" "$crease" model info "$tmp/head.crig"
 bad "train without scans" "no scans.json" "$crease" train --scans "$tmp" --rig "$tmp/head.crig" --out "$tmp/m2.cdm"
 bad "unknown training option" "unknown option 'ferns'" "$crease" train --scans "$tmp/scans" --out "$tmp/m2.cdm" --set ferns=3
-bad "bad training option" "num_ferns" "$crease" train --scans "$tmp/scans" --out "$tmp/m2.cdm" --set num_ferns=0
+bad "bad training option" "num_ferns" "$crease" train --scans "$tmp/scans" --out "$tmp/m2.cdm" --set ferns.num_ferns=0
+# Issue 18: a key from before option sections names its new key; a key set twice is refused.
+bad "old training key" "unknown option 'pca_dimensions': it is now 'pca.dimensions'" "$crease" train --scans "$tmp/scans" --out "$tmp/m2.cdm" --set pca_dimensions=6
+printf 'pca:\n  dimensions: 4\npca.dimensions: 6\n' > "$tmp/twice.yaml"
+bad "training key twice" "option 'pca.dimensions' is set twice" "$crease" train --scans "$tmp/scans" --out "$tmp/m2.cdm" --config "$tmp/twice.yaml"
 bad "unknown training light" "light 'disco'" "$crease" train --scans "$tmp/scans" --out "$tmp/m2.cdm" --set training_lights=disco
 [ ! -e "$tmp/m2.cdm" ] || { echo "FAIL: model written despite an error"; fails=$((fails+1)); }
 # Online capture (issue 6) on the 2-frame sequence with the tiny model, then its metrics.
-ok "capture" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-prior --set wrinkle_frames=2 --set hifi_mesh_resolution=64 --preview "$tmp/cap.avi" -o "$tmp/cap"
+ok "capture" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-prior --set detail.wrinkle_frames=2 --set hifi.resolution=64 --preview "$tmp/cap.avi" -o "$tmp/cap"
 for f in capture.json rig.crig timings.csv frames/000031.json frames/000031.cfr displacement/000031.exr maps/mesoscopic.exr maps/wrinkle_map.png meshes/hifi/000030.ply hifi.pvd refined.pvd previews/000030.png; do
   [ -s "$tmp/cap/$f" ] || { echo "FAIL: capture did not write $f"; fails=$((fails+1)); }
 done
@@ -101,7 +105,7 @@ grep -q "refined L~^t" "$tmp/cap/eval.md" && grep -q '"coarse_px"' "$tmp/cap/eva
 bad "capture exists" "already exists" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-prior -o "$tmp/cap"
 # The ground-truth-fit control (issue 17's exact geometry): L^t is the truth up to the
 # actor's personal deviations, far closer than the landmark fit of the prior control.
-ok "capture ground-truth fit" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-fit --set wrinkle_frames=2 --no-meshes -o "$tmp/cap_fit"
+ok "capture ground-truth fit" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-fit --set detail.wrinkle_frames=2 --no-meshes -o "$tmp/cap_fit"
 ok "eval ground-truth fit" "$crease" eval --capture "$tmp/cap_fit" --dataset "$tmp/seq" --set surface_every=0
 python3 - "$tmp/cap/eval.json" "$tmp/cap_fit/eval.json" <<'PY' || { echo "FAIL: the ground-truth fit is not closer than the prior"; fails=$((fails+1)); }
 import json, sys
@@ -202,7 +206,7 @@ bad "bad weight" "not a number" "$crease" rig evaluate "$tmp/r.crig" -e jawOpen=
 bad "unknown field" "no per-vertex field 'foo'" "$crease" mesh render "$tmp/e.vtp" --field foo -o "$tmp/y.png"
 bad "unknown subcommand" "" "$crease" frobnicate
 bad "train-tracker without data" "give --rig" "$crease" train-tracker --out "$tmp/t.ctrk"
-bad "train-tracker bad option" "num_ferns" "$crease" train-tracker --data "$tmp" --out "$tmp/t.ctrk" --set num_ferns=0
+bad "train-tracker bad option" "num_ferns" "$crease" train-tracker --data "$tmp" --out "$tmp/t.ctrk" --set regressor.num_ferns=0
 bad "train-tracker missing folder" "not a folder of labelled faces" "$crease" train-tracker --data "$tmp/none" --out "$tmp/t.ctrk"
 [ ! -e "$tmp/t.ctrk" ] || { echo "FAIL: tracker written despite an error"; fails=$((fails+1)); }
 
@@ -212,7 +216,7 @@ ok "experiment list" "$crease" experiment list
 ok "experiment dry run" "$crease" experiment run all --profile quick --dry-run -o "$tmp/exp"
 printf 'name: bad\ntraining: {num_fern: 3}\n' > "$tmp/bad.yaml"
 bad "experiment unknown option" "num_fern" "$crease" experiment run "$tmp/bad.yaml" --dry-run
-printf 'name: bad\nsweep: {values: {capture.wrinkle_frames: [0]}}\n' > "$tmp/badsweep.yaml"
+printf 'name: bad\nsweep: {values: {capture.detail.wrinkle_frames: [0]}}\n' > "$tmp/badsweep.yaml"
 bad "experiment bad sweep" "wrinkle_frames" "$crease" experiment run "$tmp/badsweep.yaml" --dry-run
 bad "experiment unknown name" "no such config" "$crease" experiment run nope
 bad "experiment bad shard" "--shard" "$crease" experiment run tracking-refinement --shard 3 --dry-run

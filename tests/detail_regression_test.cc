@@ -275,7 +275,7 @@ TEST(DetailRegression, AReferenceTextureCancelsStaticFeaturesButKeepsWrinkles) {
     return n;
   };
   DetailModel flat_model = TinyModel();
-  flat_model.wrinkle.texture_reference = "difference";
+  flat_model.wrinkle.texture_reference = TextureReference::kDifference;
   DetailRegressionOptions o = SmallOptions();
   o.wrinkle_frames = 5;
   DetailRegressor raw(TinyModel(), {}, Chart(), o), flat(flat_model, {}, Chart(), o);

@@ -39,18 +39,19 @@ dataset:
   test_actors: 2
   frames: 12
 training:
-  num_ferns: 1280
+  ferns:
+    num_ferns: 1280
 sweep:
   mode: list
   values:
-    training.num_ferns: [80, 320]
-    capture.wrinkle_frames: [5, 10]
+    training.ferns.num_ferns: [80, 320]
+    capture.detail.wrinkle_frames: [5, 10]
 profiles:
   quick:
     set:
       dataset.frames: 6
     sweep:
-      training.num_ferns: [40]
+      training.ferns.num_ferns: [40]
     seeds: 1
 claims:
   - id: c
@@ -147,12 +148,12 @@ TEST(Experiment, ParsesAConfigAndExpandsAListSweepOverSeeds) {
   EXPECT_EQ(c.sweep.mode, "list");
   const auto runs = ExpandRuns(c);
   ASSERT_EQ(runs.size(), 8u);  // (2 + 2 points) × 2 seeds
-  EXPECT_EQ(runs[0].id, "training.num_ferns=80_seed1");
-  EXPECT_EQ(runs[1].id, "training.num_ferns=80_seed2");
-  EXPECT_EQ(runs[4].id, "capture.wrinkle_frames=5_seed1");
+  EXPECT_EQ(runs[0].id, "training.ferns.num_ferns=80_seed1");
+  EXPECT_EQ(runs[1].id, "training.ferns.num_ferns=80_seed2");
+  EXPECT_EQ(runs[4].id, "capture.detail.wrinkle_frames=5_seed1");
   // A list sweep varies one key at a time: the others keep their base value.
-  EXPECT_EQ(runs[4].resolved.sections.at("training").at("num_ferns"), 1280);
-  EXPECT_EQ(runs[0].resolved.sections.at("training").at("num_ferns"), 80);
+  EXPECT_EQ(runs[4].resolved.sections.at("training").at("ferns.num_ferns"), 1280);
+  EXPECT_EQ(runs[0].resolved.sections.at("training").at("ferns.num_ferns"), 80);
 }
 
 TEST(Experiment, GridSweepIsTheCartesianProduct) {
@@ -160,8 +161,8 @@ TEST(Experiment, GridSweepIsTheCartesianProduct) {
   yaml.replace(yaml.find("mode: list"), 10, "mode: grid");
   const auto runs = ExpandRuns(ParseExperimentConfig(yaml, "grid.yaml"));
   ASSERT_EQ(runs.size(), 8u);  // 2 × 2 points × 2 seeds
-  EXPECT_EQ(runs[0].id, "training.num_ferns=80_capture.wrinkle_frames=5_seed1");
-  EXPECT_EQ(runs[0].resolved.sections.at("capture").at("wrinkle_frames"), 5);
+  EXPECT_EQ(runs[0].id, "training.ferns.num_ferns=80_capture.detail.wrinkle_frames=5_seed1");
+  EXPECT_EQ(runs[0].resolved.sections.at("capture").at("detail.wrinkle_frames"), 5);
 }
 
 TEST(Experiment, ProfilesOverrideValuesSweepsAndSeeds) {
@@ -170,7 +171,7 @@ TEST(Experiment, ProfilesOverrideValuesSweepsAndSeeds) {
   EXPECT_EQ(c.sections.at("dataset").at("frames"), 6);
   const auto runs = ExpandRuns(c);
   ASSERT_EQ(runs.size(), 3u);  // num_ferns [40] + wrinkle_frames [5, 10]
-  EXPECT_EQ(runs[0].id, "training.num_ferns=40_seed1");
+  EXPECT_EQ(runs[0].id, "training.ferns.num_ferns=40_seed1");
   // "paper" is not in the config: the config's own values are the paper profile.
   EXPECT_EQ(ExpandRuns(ApplyProfile(ParseExperimentConfig(kConfig, "toy.yaml"), "paper")).size(), 8u);
   EXPECT_THROW(ApplyProfile(ParseExperimentConfig(kConfig, "toy.yaml"), "huge"), Error);
@@ -190,14 +191,22 @@ TEST(Experiment, BadConfigsGiveErrorsNamingTheOption) {
   ExpectErrorNaming("name: x\ntraining: {num_fern: 3}\n", "num_fern");
   ExpectErrorNaming("name: x\ntrainnig: {num_ferns: 3}\n", "trainnig");
   ExpectErrorNaming("name: x\nsweep: {values: {training.nope: [1]}}\n", "nope");
-  ExpectErrorNaming("name: x\nsweep: {values: {training.num_ferns: [-1]}}\n", "num_ferns");
+  ExpectErrorNaming("name: x\nsweep: {values: {training.ferns.num_ferns: [-1]}}\n", "num_ferns");
   ExpectErrorNaming("name: x\nsweep: {values: {num_ferns: [1]}}\n", "SECTION.FIELD");
-  ExpectErrorNaming("name: x\nsweep: {values: {training.num_ferns: []}}\n", "non-empty");
+  ExpectErrorNaming("name: x\nsweep: {values: {training.ferns.num_ferns: []}}\n", "non-empty");
   ExpectErrorNaming("name: x\nsweep: {mode: diagonal}\n", "diagonal");
   ExpectErrorNaming("name: x\ndataset: {preset: dancing}\n", "dancing");
   ExpectErrorNaming("name: x\nprofiles: {quick: {set: {capture.bogus: 1}}}\n", "bogus");
   ExpectErrorNaming("title: no name\n", "name");
   ExpectErrorNaming("name: [unclosed\n", "YAML");
+  // Issue 18: keys from before option sections name their new key, in a section and
+  // in a sweep; a key set twice (nested and dotted) is refused.
+  ExpectErrorNaming("name: x\ntraining: {pca_dimensions: 8}\n", "unknown option 'pca_dimensions': it is now 'pca.dimensions'");
+  ExpectErrorNaming("name: x\nsweep: {values: {capture.fit_expression_prior_weight: [1]}}\n",
+                    "it is now 'tracker.fit.expression_prior_weight'");
+  ExpectErrorNaming("name: x\ncapture: {refinement: {lk_window: 15}, refinement.lk_window: 21}\n",
+                    "option 'refinement.lk_window' is set twice");
+  ExpectErrorNaming("name: x\ntraining: {ferns.num_ferns: 3}\ntraining: {ferns.depth: 3}\n", "key 'training' is set twice");
 }
 
 TEST(Experiment, ShardsTogetherEqualTheWhole) {
@@ -261,11 +270,11 @@ TEST(Experiment, CacheKeysChangeExactlyWithTheirInputs) {
   ExperimentConfig explicit_default = c;
   const json training_defaults = json::parse(OptionsToJson(TrainingOptions()));
   const json capture_defaults = json::parse(OptionsToJson(CaptureOptions()));
-  explicit_default.sections["training"]["fern_depth"] = training_defaults.at("fern_depth");
-  explicit_default.sections["capture"]["wrinkle_frames"] = capture_defaults.at("wrinkle_frames");
+  explicit_default.sections["training"]["ferns.depth"] = training_defaults.at("ferns.depth");
+  explicit_default.sections["capture"]["detail.wrinkle_frames"] = capture_defaults.at("detail.wrinkle_frames");
   const auto e = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, "1"));
   EXPECT_EQ(a, e);
-  explicit_default.sections["training"]["fern_depth"] = training_defaults.at("fern_depth").get<int>() + 1;
+  explicit_default.sections["training"]["ferns.depth"] = training_defaults.at("ferns.depth").get<int>() + 1;
   const auto e1 = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, "1"));
   EXPECT_NE(a.at("model"), e1.at("model"));
 }
@@ -349,6 +358,19 @@ TEST(Experiment, VariantsSweepBundlesOfSettingsAndTheLadderPlansItsRungs) {
   ExpectErrorNaming(bad, "wdth");
 }
 
+// A section's options may be nested or dotted; both are the same runs and stages.
+TEST(Experiment, NestedAndDottedSectionsAreTheSameConfig) {
+  const ExperimentConfig nested = ParseExperimentConfig(
+      "name: x\ncapture: {refinement: {lk_window: 15}, tracker: {fit: {max_iterations: 4}}}\n", "nested.yaml");
+  const ExperimentConfig dotted = ParseExperimentConfig(
+      "name: x\ncapture: {refinement.lk_window: 15, tracker.fit.max_iterations: 4}\n", "dotted.yaml");
+  EXPECT_EQ(nested.sections.at("capture"), dotted.sections.at("capture"));
+  EXPECT_EQ(dotted.sections.at("capture").at("refinement.lk_window"), 15);
+  const fs::path cache = "/tmp/cache";
+  EXPECT_EQ(KeysByKind(PlanRunStages(ExpandRuns(nested)[0], cache, "1")),
+            KeysByKind(PlanRunStages(ExpandRuns(dotted)[0], cache, "1")));
+}
+
 // Every key of the nested option structs is registered once (issue 18: the landmark
 // fit's and the refinement's expression prior shared one key until crease 0.4.1).
 TEST(Experiment, StageOptionsRegisterEachKeyOnce) {
@@ -356,7 +378,7 @@ TEST(Experiment, StageOptionsRegisterEachKeyOnce) {
   EXPECT_NO_THROW(OptionFieldNames<TrainingOptions>());
   EXPECT_NO_THROW(OptionFieldNames<ExperimentDataset>());
   CaptureOptions o;
-  SetOptionsFromJson(R"({"fit_expression_prior_weight": 2, "refine_expression_prior_weight": 7})", "capture", &o);
+  SetOptionsFromJson(R"({"tracker.fit.expression_prior_weight": 2, "refinement.expression_prior_weight": 7})", "capture", &o);
   EXPECT_EQ(o.tracker.fit.fit_expression_prior_weight, 2.0);
   EXPECT_EQ(o.refinement.fit_expression_prior_weight, 7.0);
 }
@@ -395,7 +417,7 @@ TEST(Experiment, ARunResumedAfterAFailureEqualsAnUninterruptedOne) {
   });
   EXPECT_EQ(broken.runs_ok, 0);
   EXPECT_GT(broken.stages_failed, 0);
-  const json failed = ReadJsonFile(o.out / "runs" / "training.num_ferns=80_seed1.json");
+  const json failed = ReadJsonFile(o.out / "runs" / "training.ferns.num_ferns=80_seed1.json");
   EXPECT_EQ(failed.at("status"), "failed");
   EXPECT_NE(failed.at("error").get<std::string>().find("capture stage failed"), std::string::npos);
 
@@ -424,10 +446,10 @@ TEST(Experiment, ARunResumedAfterAFailureEqualsAnUninterruptedOne) {
   // What the report reads.
   const json e = ReadJsonFile(o.out / "experiment.json");
   EXPECT_EQ(e.at("runs").size(), 8u);
-  EXPECT_EQ(e.at("sweep").at("keys"), json::array({"training.num_ferns", "capture.wrinkle_frames"}));
-  EXPECT_EQ(e.at("baseline").at("training.num_ferns"), 1280);
+  EXPECT_EQ(e.at("sweep").at("keys"), json::array({"training.ferns.num_ferns", "capture.detail.wrinkle_frames"}));
+  EXPECT_EQ(e.at("baseline").at("training.ferns.num_ferns"), 1280);
   EXPECT_EQ(e.at("claims").size(), 1u);
-  const json run = ReadJsonFile(o.out / "runs" / "capture.wrinkle_frames=5_seed1.json");
+  const json run = ReadJsonFile(o.out / "runs" / "capture.detail.wrinkle_frames=5_seed1.json");
   EXPECT_EQ(run.at("metrics").at("model.pca_dims_85"), 3);
   EXPECT_EQ(run.at("metrics").at("pairs.training_pairs"), 100);
   EXPECT_GT(run.at("metrics").at("tracking.coarse_px").get<double>(), 6.0);
@@ -436,14 +458,14 @@ TEST(Experiment, ARunResumedAfterAFailureEqualsAnUninterruptedOne) {
   std::ifstream csv(o.out / "results.csv");
   std::string header;
   std::getline(csv, header);
-  EXPECT_EQ(header.rfind("run_id,seed,status,training.num_ferns,capture.wrinkle_frames,", 0), 0u) << header;
+  EXPECT_EQ(header.rfind("run_id,seed,status,training.ferns.num_ferns,capture.detail.wrinkle_frames,", 0), 0u) << header;
   fs::remove_all(root);
 }
 
 TEST(Experiment, ExperimentsRunTogetherShareTheirStages) {
   const ExperimentConfig a = ParseExperimentConfig(kConfig, "toy.yaml");
   ExperimentConfig b = ParseExperimentConfig(
-      "name: other\nseeds: 2\ndataset: {training_actors: 2, test_actors: 2, frames: 12}\ntraining: {num_ferns: 1280}\n",
+      "name: other\nseeds: 2\ndataset: {training_actors: 2, test_actors: 2, frames: 12}\ntraining: {ferns.num_ferns: 1280}\n",
       "other.yaml");
   const fs::path root = TempDir("together");
   ExperimentRunnerOptions o;

@@ -102,8 +102,7 @@ TEST(FernCascadeTest, TextureNormalisationCancelsAlbedoAndContrast) {
   EXPECT_EQ(normalised(std::vector<float>(16, 0.0f), "gain"), std::vector<float>(16, 0.0f));
   EXPECT_THROW(normalised(p, "bogus"), Error);
   FernOptions o;
-  o.fern_texture_normalization = "bogus";
-  EXPECT_THROW(o.Check(), Error);
+  EXPECT_THROW(SetOptionsFromJson(R"({"texture_normalization": "bogus"})", "f.json", &o), Error);
 }
 
 TEST(FernCascadeTest, BinOutputsFollowEq4OnHandMadeBins) {
@@ -250,8 +249,8 @@ TEST(FernCascadeTest, AlternativeRulesAlsoLearn) {
        std::vector<std::pair<std::string, std::string>>{{"range", "correlation"}, {"sample", "random"}}) {
     FernOptions o = SmallOptions();
     o.num_ferns = 100;
-    o.fern_threshold_rule = threshold_rule;
-    o.fern_pair_selection = pair_selection;
+    o.fern_threshold_rule = FromString<FernThresholdRule>(threshold_rule, "threshold_rule");
+    o.fern_pair_selection = FromString<FernPairSelection>(pair_selection, "pair_selection");
     const FernTrainingReport report = TrainFernCascade(train, targets, o).report;
     EXPECT_LT(report.train_rmse.back(), 0.9 * report.train_rmse.front()) << threshold_rule << "/" << pair_selection;
   }
@@ -353,9 +352,6 @@ TEST(FernCascadeTest, BadInputIsAClearError) {
   FernOptions too_many = o;
   too_many.num_sampled_pixels = 17;
   EXPECT_NE(error(patches, targets, too_many).find("num_sampled_pixels"), std::string::npos);
-  FernOptions bad_rule = o;
-  bad_rule.fern_threshold_rule = "median";
-  EXPECT_NE(error(patches, targets, bad_rule).find("fern_threshold_rule"), std::string::npos);
   FernOptions bad_beta = o;
   bad_beta.shrinkage = -1;
   EXPECT_NE(error(patches, targets, bad_beta).find("shrinkage"), std::string::npos);
@@ -375,20 +371,25 @@ TEST(FernCascadeTest, BadInputIsAClearError) {
 TEST(FernCascadeTest, OptionsHaveUniqueReadableKeys) {
   FernOptions o;
   SetOptionsFromJson(
-      R"({"num_ferns": 640, "fern_depth": 4, "num_sampled_pixels": 30, "shrinkage": 250, "fern_seed": 9,
-          "fern_threshold_rule": "range", "fern_threshold_range": 0.5, "fern_pair_selection": "random"})",
+      R"({"num_ferns": 640, "depth": 4, "num_sampled_pixels": 30, "shrinkage": 250, "seed": 9,
+          "threshold_rule": "range", "threshold_range": 0.5, "pair_selection": "random"})",
       "test", &o);
   EXPECT_EQ(o.num_ferns, 640);
   EXPECT_EQ(o.fern_depth, 4);
   EXPECT_EQ(o.num_sampled_pixels, 30);
   EXPECT_EQ(o.shrinkage, 250.0);
   EXPECT_EQ(o.fern_seed, 9u);
-  EXPECT_EQ(o.fern_threshold_rule, "range");
+  EXPECT_EQ(o.fern_threshold_rule, FernThresholdRule::kRange);
   EXPECT_EQ(o.fern_threshold_range, 0.5);
-  EXPECT_EQ(o.fern_pair_selection, "random");
-  EXPECT_NE(ErrorOf([&] { SetOptionsFromJson(R"({"fern_depth": 17})", "test", &o); }).find("fern_depth"),
+  EXPECT_EQ(o.fern_pair_selection, FernPairSelection::kRandom);
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromJson(R"({"depth": 17})", "test", &o); }).find("fern_depth"),
             std::string::npos);
-  EXPECT_NE(ErrorOf([&] { SetOptionsFromJson(R"({"seed": 1})", "test", &o); }).find("seed"), std::string::npos);
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromJson(R"({"fern_seed": 1})", "test", &o); }).find("it is now 'seed'"),
+            std::string::npos);
+  // A mode outside its enum is refused listing the allowed values (issue 18).
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromJson(R"({"threshold_rule": "median"})", "f.json", &o); })
+                .find("f.json: option 'threshold_rule' must be one of: sample, range, got \"median\""),
+            std::string::npos);
 }
 
 }  // namespace

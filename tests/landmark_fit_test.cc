@@ -8,6 +8,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/options.h"
 #include "core/rng.h"
 #include "synth/procedural_rig.h"
 #include "tests/synth_test_util.h"
@@ -257,8 +258,8 @@ TEST(LandmarkFit, BadInput) {
   o.contour_tangent_weight = 2.0;
   EXPECT_ERROR_HAS(o.Check(), "contour_tangent_weight");
   o = {};
-  o.fit_linear_solver = "sparse";
-  EXPECT_ERROR_HAS(LandmarkRigFitter(rig, Intrinsics(), o), "fit_linear_solver");
+  EXPECT_ERROR_HAS(SetOptionsFromJson(R"({"linear_solver": "sparse"})", "fit.json", &o),
+                   "fit.json: option 'linear_solver' must be one of: dense_normal_cholesky, dense_qr");
 }
 
 TEST(LandmarkFit, GroundTruthPriorIsTheRigsBestExplanation) {

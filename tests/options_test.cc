@@ -1,5 +1,8 @@
 #include "core/options.h"
 
+#include <algorithm>
+#include <array>
+
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
@@ -154,6 +157,123 @@ TEST(Options, CheckIsCalledAndNamesTheField) {
   EXPECT_EQ(e, "ExampleOptions.num_ferns = 0 must be > 0");
   e = ErrorOf([&] { SetOptionsFromJson(R"({"solver": "qr"})", "x", &o); });
   EXPECT_EQ(e, "ExampleOptions.solver = 'qr' must be one of: ldlt, cholmod");
+}
+
+// Options with sections (issue 18): two nested structs that share field names, each
+// under its own section, and a mode as an enum.
+enum class Mode { kFast, kExact };
+constexpr std::array<const char*, 2> OptionEnumNames(Mode) { return {"fast", "exact"}; }
+
+struct FitOptions {
+  double expression_prior_weight = 1.0;
+  int max_iterations = 10;
+  Mode mode = Mode::kFast;
+  void VisitFields(OptionVisitor& v) {
+    v.Field("expression_prior_weight", expression_prior_weight);
+    v.Field("max_iterations", max_iterations);
+    v.Field("mode", mode);
+  }
+  void Check() const {}
+};
+
+struct StageOptions {
+  FitOptions fit, refinement;
+  ExampleOptions inner;
+  bool refine = true;
+  void VisitFields(OptionVisitor& v) {
+    v.Section("fit", fit);
+    v.Section("refinement", refinement);
+    v.Section("deep", inner);  // a section of a struct that is not a section itself
+    v.Field("refine", refine);
+  }
+  void Check() const {}
+};
+
+TEST(Options, SectionsPrefixTheirKeysAndRoundTrip) {
+  const std::vector<std::string> keys = OptionFieldNames<StageOptions>();
+  EXPECT_EQ(keys.front(), "fit.expression_prior_weight");
+  EXPECT_NE(std::find(keys.begin(), keys.end(), "refinement.mode"), keys.end());
+  EXPECT_NE(std::find(keys.begin(), keys.end(), "deep.num_ferns"), keys.end());
+  EXPECT_EQ(keys.back(), "refine");
+  StageOptions a;
+  a.fit.expression_prior_weight = 5.0;
+  a.refinement.expression_prior_weight = 0.25;
+  a.refinement.mode = Mode::kExact;
+  a.inner.num_ferns = 3;
+  const std::string text = OptionsToJson(a);
+  EXPECT_NE(text.find(R"("refinement.mode": "exact")"), std::string::npos) << text;
+  StageOptions b;
+  SetOptionsFromJson(text, "roundtrip", &b);
+  EXPECT_EQ(OptionsToJson(b), text);
+  EXPECT_EQ(b.fit.expression_prior_weight, 5.0);
+  EXPECT_EQ(b.refinement.expression_prior_weight, 0.25);
+  EXPECT_EQ(b.refinement.mode, Mode::kExact);
+  EXPECT_EQ(b.inner.num_ferns, 3);
+}
+
+TEST(Options, ASectionMayBeNestedOrDotted) {
+  StageOptions nested, dotted, mixed;
+  SetOptionsFromYaml("fit:\n  max_iterations: 3\nrefinement: {expression_prior_weight: 5, mode: exact}\n"
+                     "deep: {num_ferns: 7}\n", "nested.yaml", &nested);
+  SetOptionsFromYaml("fit.max_iterations: 3\nrefinement.expression_prior_weight: 5\nrefinement.mode: exact\n"
+                     "deep.num_ferns: 7\n", "dotted.yaml", &dotted);
+  SetOptionsFromJson(R"({"fit": {"max_iterations": 3}, "refinement.expression_prior_weight": 5,
+                         "refinement": {"mode": "exact"}, "deep.num_ferns": 7})", "mixed.json", &mixed);
+  EXPECT_EQ(OptionsToJson(nested), OptionsToJson(dotted));
+  EXPECT_EQ(OptionsToJson(mixed), OptionsToJson(dotted));
+  EXPECT_EQ(dotted.fit.max_iterations, 3);
+  EXPECT_EQ(dotted.fit.expression_prior_weight, 1.0);  // the other section's field is untouched
+  EXPECT_EQ(dotted.refinement.expression_prior_weight, 5.0);
+  EXPECT_EQ(FlattenOptionKeys(R"({"a": {"b": {"c": 1}}, "d": 2})", "x"), R"({"a.b.c":1,"d":2})");
+}
+
+TEST(Options, AKeySetTwiceInAFileIsRefused) {
+  StageOptions o;
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromYaml("fit:\n  max_iterations: 3\nfit.max_iterations: 4\n", "twice.yaml", &o); })
+                .find("twice.yaml: option 'fit.max_iterations' is set twice"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromYaml("refine: true\nrefine: false\n", "same.yaml", &o); })
+                .find("same.yaml:2:1: key 'refine' is set twice"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromJson(R"({"refine": true, "refine": false})", "same.json", &o); })
+                .find("same.json: option 'refine' is set twice"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { SetOptionsFromJson(R"({"fit": {"mode": "fast"}, "fit.mode": "exact"})", "mix.json", &o); })
+                .find("mix.json: option 'fit.mode' is set twice"),
+            std::string::npos);
+  EXPECT_EQ(o.fit.max_iterations, 10);  // unchanged on error
+}
+
+TEST(Options, UnknownAndOldKeysAreRefusedByName) {
+  StageOptions o;
+  std::string e = ErrorOf([&] { SetOptionsFromJson(R"({"fit.nope": 1})", "u.json", &o); });
+  EXPECT_NE(e.find("u.json: unknown option 'fit.nope' (known options: fit.expression_prior_weight,"), std::string::npos) << e;
+  // A key of a section given without it (as before sections) names the new key.
+  e = ErrorOf([&] { SetOptionsFromJson(R"({"num_ferns": 1})", "old.json", &o); });
+  EXPECT_EQ(e, "old.json: unknown option 'num_ferns': it is now 'deep.num_ferns'");
+  e = ErrorOf([&] { SetOptionsFromJson(R"({"max_iterations": 1})", "old.json", &o); });
+  EXPECT_EQ(e, "old.json: unknown option 'max_iterations': it is now 'fit.max_iterations' or 'refinement.max_iterations'");
+  // A renamed key (RenamedOptionKeys): the old flat name with its hand-made prefix.
+  e = ErrorOf([&] { SetOptionsFromJson(R"({"fit_expression_prior_weight": 1})", "old.yaml", &o); });
+  EXPECT_EQ(e, "old.yaml: unknown option 'fit_expression_prior_weight': it is now 'fit.expression_prior_weight'");
+  e = ErrorOf([&] { SetOptionsFromJson(R"({"refine_expression_prior_weight": 1})", "old.yaml", &o); });
+  EXPECT_EQ(e, "old.yaml: unknown option 'refine_expression_prior_weight': it is now 'refinement.expression_prior_weight'");
+  // Files crease wrote itself read old keys as their new ones.
+  SetOptionsFromStoredJson(R"({"fit_expression_prior_weight": 7, "refine": false})", "model", &o);
+  EXPECT_EQ(o.fit.expression_prior_weight, 7.0);
+  EXPECT_FALSE(o.refine);
+}
+
+TEST(Options, AnEnumTakesItsNamesAndListsThemOnError) {
+  EXPECT_EQ(ToString(Mode::kExact), "exact");
+  EXPECT_EQ(FromString<Mode>("fast", "mode"), Mode::kFast);
+  EXPECT_EQ(EnumNames<Mode>(), (std::vector<std::string>{"fast", "exact"}));
+  EXPECT_EQ(ErrorOf([] { FromString<Mode>("slow", "fit.mode"); }), "fit.mode = 'slow' must be one of: fast, exact");
+  StageOptions o;
+  EXPECT_EQ(ErrorOf([&] { SetOptionsFromYaml("refinement: {mode: slow}\n", "m.yaml", &o); }),
+            "m.yaml: option 'refinement.mode' must be one of: fast, exact, got \"slow\"");
+  EXPECT_EQ(ErrorOf([&] { SetOptionsFromYaml("fit.mode: 3\n", "m.yaml", &o); }),
+            "m.yaml: option 'fit.mode' must be one of: fast, exact, got 3");
 }
 
 TEST(Options, ToJsonRoundTrips) {

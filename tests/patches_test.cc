@@ -63,7 +63,7 @@ TEST(PatchLayoutOptionsTest, DefaultsAndChecks) {
   EXPECT_EQ(o.patch_density, 0.5);
   EXPECT_EQ(o.patch_max_outside_fraction, 0.0);
   o.Check();
-  SetOptionsFromJson(R"({"patch_size": 16, "patch_density": 0.25})", "--set", &o);
+  SetOptionsFromJson(R"({"size": 16, "density": 0.25})", "--set", &o);
   EXPECT_EQ(o.patch_size, 16);
   o.patch_density = 0.0;
   EXPECT_ERROR_HAS(o.Check(), "patch_density");

@@ -143,7 +143,7 @@ TEST(PcaTest, BadInputIsAClearError) {
   EXPECT_NE(ErrorOf([&] { FitPatchPca(patches, too_many); }).find("dimensions = 17"), std::string::npos);
   PcaOptions zero;
   zero.dimensions = 0;
-  EXPECT_NE(ErrorOf([&] { FitPatchPca(patches, zero); }).find("PcaOptions.pca_dimensions"), std::string::npos);
+  EXPECT_NE(ErrorOf([&] { FitPatchPca(patches, zero); }).find("PcaOptions.dimensions"), std::string::npos);
   Eigen::MatrixXf with_nan = patches;
   with_nan(6, 3) = std::numeric_limits<float>::quiet_NaN();
   const std::string message = ErrorOf([&] { FitPatchPca(with_nan, PcaOptions{}); });
@@ -157,9 +157,9 @@ TEST(PcaTest, BadInputIsAClearError) {
 
 TEST(PcaTest, OptionsFromJson) {
   PcaOptions options;
-  SetOptionsFromJson(R"({"pca_dimensions": 24})", "test", &options);
+  SetOptionsFromJson(R"({"dimensions": 24})", "test", &options);
   EXPECT_EQ(options.dimensions, 24);
-  EXPECT_FALSE(ErrorOf([&] { SetOptionsFromJson(R"({"pca_dimensions": -1})", "test", &options); }).empty());
+  EXPECT_FALSE(ErrorOf([&] { SetOptionsFromJson(R"({"dimensions": -1})", "test", &options); }).empty());
 }
 
 TEST(PcaTest, EigenPatchMosaicLayout) {

@@ -14,6 +14,7 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "core/options.h"
 #include "core/rng.h"
 #include "tests/test_util.h"
 
@@ -64,7 +65,7 @@ cv::Mat Enclosed(int S, const cv::Mat& domain, const cv::Mat& known) {
 PoissonFillOptions Coarse(int fill_resolution, const std::string& boundary = "zero") {
   PoissonFillOptions o;
   o.fill_resolution = fill_resolution;
-  o.fill_boundary = boundary;
+  o.fill_boundary = FromString<FillBoundary>(boundary, "fill.boundary");
   return o;
 }
 
@@ -203,7 +204,7 @@ TEST(PoissonFill, BadInputIsAClearError) {
   EXPECT_ERROR_HAS(PoissonFill(f32, known, Coarse(16)), "domain mask must be CV_8UC1");
   EXPECT_ERROR_HAS(PoissonFill(cv::Mat(), known, Coarse(16)), "domain mask is empty");
   EXPECT_ERROR_HAS(PoissonFill(DiscDomain(66), RingKnown(66), Coarse(16)), "not a multiple of the block size");
-  EXPECT_ERROR_HAS(PoissonFill(domain, known, Coarse(16, "dirichlet")), "fill_boundary");
+  EXPECT_ERROR_HAS(Coarse(16, "dirichlet"), "fill.boundary = 'dirichlet' must be one of: zero, neumann");
   PoissonFillOptions bad = Coarse(16);
   bad.fill_smoothing_sweeps = -1;
   EXPECT_ERROR_HAS(PoissonFill(domain, known, bad), "fill_smoothing_sweeps");

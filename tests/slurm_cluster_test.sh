@@ -69,7 +69,7 @@ actor: {resolution: 256, surface_min_vertices: 20000}
 training: {map_resolution: 256}
 sweep:
   values:
-    training.num_ferns: [20, 40]
+    training.ferns.num_ferns: [20, 40]
 slurm:
   default: {cpus: 1, mem: 1G, time: "10:00"}
 EOF

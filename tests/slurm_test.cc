@@ -30,7 +30,7 @@ seeds: 1
 dataset: {training_actors: 1, test_actors: 1, frames: 4, exclusive_capture: true}
 sweep:
   values:
-    training.num_ferns: [20, 40]
+    training.ferns.num_ferns: [20, 40]
 slurm:
   default: {cpus: 1, mem: 1G}
   capture: {cpus: 4, time: "8:00:00"}
@@ -274,7 +274,7 @@ TEST(Slurm, TheBackendSubmitsWhatIsMissingWithAfterokOnItsInputsJobs) {
     }
     EXPECT_NE(line.find(SlurmJobDir(stages[i]).string() + "/job.sh"), std::string::npos) << line;
   }
-  const json run = ReadJsonFile(o.out / "runs" / "training.num_ferns=20_seed1.json");
+  const json run = ReadJsonFile(o.out / "runs" / "training.ferns.num_ferns=20_seed1.json");
   EXPECT_NE(run.at("error").get<std::string>().find("rig stage failed (Slurm job 100, CANCELLED)"), std::string::npos)
       << run.at("error");
   EXPECT_TRUE(fs::exists(o.out / "stages.json"));

@@ -213,7 +213,7 @@ TEST(Trainer, SavedPairsRetrainTheSameRegressorAndRefuseOtherExtraction) {
     OptionsForPairs(back, "p.cpr", [](TrainingOptions* t) { t->patch.patch_size = 16; });
     FAIL() << "no error";
   } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("patch_size"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("patch.size"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("p.cpr"), std::string::npos) << e.what();
   }
   // A truncated file is an error naming it.

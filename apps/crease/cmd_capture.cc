@@ -98,7 +98,7 @@ void AddCaptureCommand(CLI::App& app) {
   cmd->add_flag("--textures", a->write_textures, "Also write every frame's texture T^t (textures/NNNNNN.png, sRGB gray)");
   cmd->add_flag("--no-maps", a->no_maps, "Skip the per-frame displacement maps D^t (EXR)");
   cmd->add_option("--config", a->config, "YAML of capture options (pipeline/capture/capture.h CaptureOptions)");
-  cmd->add_option("--set", a->sets, "Capture option KEY=VALUE (repeatable), e.g. wrinkle_frames=20 refine=false");
+  cmd->add_option("--set", a->sets, "Capture option KEY=VALUE (repeatable), e.g. detail.wrinkle_frames=20 refine=false");
   cmd->add_flag("--overwrite", a->overwrite, "Replace an existing output folder");
   cmd->callback([a] { RunCaptureCommand(*a); });
 }

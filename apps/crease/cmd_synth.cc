@@ -73,8 +73,8 @@ void AddSynthCommands(CLI::App& app) {
         ->check(CLI::IsMember({"ict", "procedural"}));
     cmd->add_option("--from", from, "With --head ict: the imported ICT rig (default: the vendored "
                                     "data/ict/ict_face_light.crig)");
-    cmd->add_option("--set", sets, "Rig option KEY=VALUE (repeatable): identity_modes=40 (ict), face_columns=72 "
-                                   "(procedural), … (synth/studio_rig.h)");
+    cmd->add_option("--set", sets, "Rig option KEY=VALUE (repeatable): ict.identity_modes=40, procedural.face_columns=72 "
+                                   ", … (synth/studio_rig.h)");
     cmd->add_option("--preview", preview, "Also write a contact sheet of renders (neutral and expressions)");
     cmd->add_option("--preview-tile", preview_tile, "Preview tile size, pixels")->capture_default_str();
     cmd->callback([] {

@@ -197,7 +197,7 @@ void AddSequenceCommand(CLI::App* synth) {
   cmd->add_flag("--overwrite", a->overwrite, "Replace an existing output folder");
   cmd->add_option("--out,-o", a->out, "Output dataset folder")->required();
   cmd->add_option("--set", a->sets, "Studio option KEY=VALUE (repeatable; synth/studio.h StudioOptions and the sensor's "
-                                    "SensorOptions), e.g. distance_mm=600 jpeg_quality=70");
+                                    "SensorOptions in section sensor), e.g. distance_mm=600 sensor.jpeg_quality=70");
   cmd->callback([a] { RunSequence(*a); });
 }
 

@@ -47,7 +47,7 @@ void AddTrainTrackerCommand(CLI::App& app) {
   cmd->add_option("--config", config,
                   "Options (YAML; keys: eval/tracker_training.h TrackerTrainingOptions and "
                   "pipeline/capture/shape_regressor.h ShapeRegressorOptions)");
-  cmd->add_option("--set", sets, "Option KEY=VALUE (repeatable), e.g. num_stages=6 num_ferns=50 lights=[\"front\"]");
+  cmd->add_option("--set", sets, "Option KEY=VALUE (repeatable), e.g. regressor.num_stages=6 regressor.num_ferns=50 lights=[\"front\"]");
   cmd->add_option("--report", report, "Report (JSON; default: <out without extension>_report.json)");
   cmd->callback([] {
     TrackerTrainingOptions options;

@@ -136,7 +136,7 @@ void AddTrainCommand(CLI::App& app) {
   cmd->add_option("--rig", a->rig_path, "The tracker's rig (.crig); default: the rig the scan set names");
   cmd->add_option("--out,-o", a->out, "Model file to write (.cdm)");
   cmd->add_option("--config", a->config, "Training options (YAML; keys: pipeline/training/trainer.h TrainingOptions)");
-  cmd->add_option("--set", a->sets, "Training option KEY=VALUE (repeatable), e.g. num_ferns=640 dimensions=8");
+  cmd->add_option("--set", a->sets, "Training option KEY=VALUE (repeatable), e.g. ferns.num_ferns=640 pca.dimensions=8");
   cmd->add_option("--report", a->report, "Report folder (default: <out without extension>_report)");
   cmd->callback([a] {
     if (a->scans.empty() == a->pairs_in.empty()) throw Error("train: give --scans (a scan set) or --pairs (saved pairs)");
@@ -177,7 +177,7 @@ void AddEvalExtractionCommand(CLI::App& app) {
   auto a = std::make_shared<EvalExtractionArgs>();
   cmd->add_option("--scans", a->scans, "Scan set folder from `crease synth scans`")->required();
   cmd->add_option("--config", a->config, "Training options (YAML; the detail extraction's and validation_band_mm are used)");
-  cmd->add_option("--set", a->sets, "Training option KEY=VALUE (repeatable), e.g. lowpass_bandwidth_mm=2");
+  cmd->add_option("--set", a->sets, "Training option KEY=VALUE (repeatable), e.g. detail.lowpass_bandwidth_mm=2");
   cmd->add_option("--actors", a->actors, "Evaluate the first N actors only (0 = all)")->capture_default_str();
   cmd->add_option("--json", a->json_out, "Write the rows as JSON");
   cmd->callback([a] { RunEvalExtraction(*a); });
@@ -252,7 +252,7 @@ void AddModelLoaoCommand(CLI::App* model_cmd) {
   cmd->add_option("--regressors", a->regressors, "Regressors scored, comma-separated: ferns, ridge, nearest")
       ->capture_default_str();
   cmd->add_option("--config", a->config, "Training options (YAML; only PCA and cascade options may differ)");
-  cmd->add_option("--set", a->sets, "Training option KEY=VALUE (repeatable), e.g. num_ferns=640");
+  cmd->add_option("--set", a->sets, "Training option KEY=VALUE (repeatable), e.g. ferns.num_ferns=640");
   cmd->add_option("--json", a->json, "Write the folds and their means as JSON");
   cmd->callback([a] { RunLoao(*a); });
 }

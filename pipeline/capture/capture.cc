@@ -47,12 +47,12 @@ cv::Mat WrinkleTextureFromDisplacement(const cv::Mat& displacement, int R) {
 }
 
 void CaptureOptions::VisitFields(OptionVisitor& v) {
-  tracker.VisitFields(v);
-  refinement.VisitFields(v);
-  texture.VisitFields(v);
-  detail.VisitFields(v);
-  mesoscopic.VisitFields(v);
-  hifi.VisitFields(v);
+  v.Section("tracker", tracker);
+  v.Section("refinement", refinement);
+  v.Section("texture", texture);
+  v.Section("detail", detail);
+  v.Section("mesoscopic", mesoscopic);
+  v.Section("hifi", hifi);
   v.Field("refine", refine);
   v.Field("regress_detail", regress_detail);
   v.Field("mesoscopic_detail", mesoscopic_detail);

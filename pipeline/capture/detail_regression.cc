@@ -27,7 +27,7 @@ void DetailRegressionOptions::VisitFields(OptionVisitor& v) {
   v.Field("wrinkle_extension_sigma", wrinkle_extension_sigma);
   v.Field("patch_max_unseen_fraction", patch_max_unseen_fraction);
   v.Field("gate_by_response", gate_by_response);
-  fill.VisitFields(v);
+  v.Section("fill", fill);
 }
 
 void DetailRegressionOptions::Check() const {
@@ -91,12 +91,12 @@ struct DetailRegressor::Impl {
   cv::Mat reference;
   double reference_mean = 0.0;
 
-  bool flattens() const { return model.wrinkle.texture_reference != "none"; }
+  bool flattens() const { return model.wrinkle.texture_reference != TextureReference::kNone; }
   // `gray` as the map and the patches read it: flattened after FixLayout in mode
   // ratio or difference, itself otherwise.
   cv::Mat Input(const cv::Mat& gray, const cv::Mat& seen) const {
     if (!flattens()) return gray.isContinuous() ? gray : gray.clone();
-    return FlattenByReference(gray, reference, SeenChart(seen), model.wrinkle.texture_reference, reference_mean);
+    return FlattenByReference(gray, reference, SeenChart(seen), ToString(model.wrinkle.texture_reference), reference_mean);
   }
   // The chart texels seen in a frame (coverage ∧ seen; empty seen = all).
   cv::Mat SeenChart(const cv::Mat& seen) const {
@@ -317,7 +317,7 @@ void DetailRegressor::FixLayout() {
     for (size_t k = 0; k < m.held_gray.size(); ++k) {
       m.AddToMap(m.held_map[k].empty()
                      ? FlattenByReference(m.held_gray[k], m.reference, m.held_seen[k],
-                                          m.model.wrinkle.texture_reference, m.reference_mean)
+                                          ToString(m.model.wrinkle.texture_reference), m.reference_mean)
                      : m.held_map[k],
                  m.held_seen[k]);
     }

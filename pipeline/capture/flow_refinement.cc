@@ -49,7 +49,7 @@ void FlowRefinementOptions::VisitFields(OptionVisitor& v) {
   v.Field("mls_min_neighbours", mls_min_neighbours);
   v.Field("fit_flow_weight", fit_flow_weight);
   v.Field("fit_landmark_weight", fit_landmark_weight);
-  v.Field("refine_expression_prior_weight", fit_expression_prior_weight);
+  v.Field("expression_prior_weight", fit_expression_prior_weight);
   v.Field("fit_tracker_prior_weight", fit_tracker_prior_weight);
   v.Field("fit_iterations", fit_iterations);
   v.Field("fit_hessian_refresh", fit_hessian_refresh);

@@ -71,10 +71,10 @@ void FrameTextureOptions::Check() const {
 }
 
 void MesoscopicOptions::VisitFields(OptionVisitor& v) {
-  v.Field("meso_small_kernel", meso_small_kernel);
-  v.Field("meso_large_kernel", meso_large_kernel);
-  v.Field("meso_scale", meso_scale);
-  v.Field("meso_reference_resolution", meso_reference_resolution);
+  v.Field("small_kernel", meso_small_kernel);
+  v.Field("large_kernel", meso_large_kernel);
+  v.Field("scale", meso_scale);
+  v.Field("reference_resolution", meso_reference_resolution);
 }
 
 void MesoscopicOptions::Check() const {

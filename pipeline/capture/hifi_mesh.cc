@@ -16,7 +16,7 @@
 
 namespace crease {
 
-void HifiMeshOptions::VisitFields(OptionVisitor& v) { v.Field("hifi_mesh_resolution", hifi_mesh_resolution); }
+void HifiMeshOptions::VisitFields(OptionVisitor& v) { v.Field("resolution", hifi_mesh_resolution); }
 
 void HifiMeshOptions::Check() const {
   const char* o = "HifiMeshOptions";

@@ -12,22 +12,22 @@
 namespace crease {
 
 void LandmarkFitOptions::VisitFields(OptionVisitor& v) {
-  v.Field("fit_expression_prior_weight", fit_expression_prior_weight);
-  v.Field("fit_temporal_expression_weight", fit_temporal_expression_weight);
-  v.Field("fit_temporal_rotation_weight", fit_temporal_rotation_weight);
-  v.Field("fit_temporal_translation_weight", fit_temporal_translation_weight);
-  v.Field("fit_temporal_depth_weight", fit_temporal_depth_weight);
-  v.Field("fit_identity_prior_weight", fit_identity_prior_weight);
+  v.Field("expression_prior_weight", fit_expression_prior_weight);
+  v.Field("temporal_expression_weight", fit_temporal_expression_weight);
+  v.Field("temporal_rotation_weight", fit_temporal_rotation_weight);
+  v.Field("temporal_translation_weight", fit_temporal_translation_weight);
+  v.Field("temporal_depth_weight", fit_temporal_depth_weight);
+  v.Field("identity_prior_weight", fit_identity_prior_weight);
   v.Field("identity_frames", identity_frames);
   v.Field("identity_fit_interval", identity_fit_interval);
   v.Field("identity_fit_iterations", identity_fit_iterations);
   v.Field("contour_weight", contour_weight);
   v.Field("contour_tangent_weight", contour_tangent_weight);
   v.Field("landmark_robust_loss_px", landmark_robust_loss_px);
-  v.Field("fit_max_iterations", fit_max_iterations);
-  v.Field("fit_initial_max_iterations", fit_initial_max_iterations);
-  v.Field("fit_function_tolerance", fit_function_tolerance);
-  v.Field("fit_linear_solver", fit_linear_solver);
+  v.Field("max_iterations", fit_max_iterations);
+  v.Field("initial_max_iterations", fit_initial_max_iterations);
+  v.Field("function_tolerance", fit_function_tolerance);
+  v.Field("linear_solver", fit_linear_solver);
 }
 
 void LandmarkFitOptions::Check() const {
@@ -49,7 +49,6 @@ void LandmarkFitOptions::Check() const {
   CheckGe(o, "fit_initial_max_iterations", fit_initial_max_iterations, 1);
   CheckGt(o, "fit_function_tolerance", fit_function_tolerance, 0.0);
   CheckLt(o, "fit_function_tolerance", fit_function_tolerance, 1.0);
-  CheckOneOf(o, "fit_linear_solver", fit_linear_solver, {"dense_normal_cholesky", "dense_qr"});
 }
 
 void GroundTruthPriorOptions::VisitFields(OptionVisitor& v) {
@@ -396,7 +395,7 @@ LandmarkFrameFit LandmarkRigFitter::SolveFrame(const std::vector<PointTerm>& ter
 
   ceres::Solver::Options so;
   so.linear_solver_type =
-      options_.fit_linear_solver == "dense_qr" ? ceres::DENSE_QR : ceres::DENSE_NORMAL_CHOLESKY;
+      options_.fit_linear_solver == FitLinearSolver::kDenseQr ? ceres::DENSE_QR : ceres::DENSE_NORMAL_CHOLESKY;
   so.num_threads = 1;
   so.logging_type = ceres::SILENT;
   so.max_num_iterations = initialise ? options_.fit_initial_max_iterations : options_.fit_max_iterations;

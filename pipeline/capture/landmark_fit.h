@@ -73,6 +73,7 @@
 //      blendshape prior are the job of the flow refinement (Sec. 5.1).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -85,6 +86,10 @@
 namespace crease {
 
 class OptionVisitor;
+
+// LandmarkFitOptions::fit_linear_solver: Ceres' DENSE_NORMAL_CHOLESKY or DENSE_QR.
+enum class FitLinearSolver { kDenseNormalCholesky, kDenseQr };
+constexpr std::array<const char*, 2> OptionEnumNames(FitLinearSolver) { return {"dense_normal_cholesky", "dense_qr"}; }
 
 struct LandmarkFitOptions {
   // λ_β: expression prior (pulls weights to 0), px² per unit weight².
@@ -130,7 +135,7 @@ struct LandmarkFitOptions {
   // (Re)initialisation frames use 1/100 of it.
   double fit_function_tolerance = 1e-4;
   // Linear solver of the per-frame problem: "dense_normal_cholesky" or "dense_qr".
-  std::string fit_linear_solver = "dense_normal_cholesky";
+  FitLinearSolver fit_linear_solver = FitLinearSolver::kDenseNormalCholesky;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;

@@ -21,16 +21,15 @@
 namespace crease {
 
 void PoissonFillOptions::VisitFields(OptionVisitor& v) {
-  v.Field("fill_resolution", fill_resolution);
-  v.Field("fill_boundary", fill_boundary);
-  v.Field("fill_smoothing_sweeps", fill_smoothing_sweeps);
-  v.Field("fill_band_texels", fill_band_texels);
+  v.Field("resolution", fill_resolution);
+  v.Field("boundary", fill_boundary);
+  v.Field("smoothing_sweeps", fill_smoothing_sweeps);
+  v.Field("band_texels", fill_band_texels);
 }
 
 void PoissonFillOptions::Check() const {
   const char* o = "PoissonFillOptions";
   CheckGe(o, "fill_resolution", fill_resolution, 2);
-  CheckOneOf(o, "fill_boundary", fill_boundary, {"zero", "neumann"});
   CheckGe(o, "fill_smoothing_sweeps", fill_smoothing_sweeps, 0);
   CheckLe(o, "fill_smoothing_sweeps", fill_smoothing_sweeps, 1000);
   CheckGe(o, "fill_band_texels", fill_band_texels, 0);
@@ -200,7 +199,7 @@ void PoissonFill::Impl::SetSizes(int map_size, const PoissonFillOptions& options
                                   R, s, R, options.fill_resolution));
   Rc = R / s;
   Require(Rc >= 2, fmt::format("PoissonFill: coarse grid {}x{} is too small", Rc, Rc));
-  zero_boundary = options.fill_boundary == "zero";
+  zero_boundary = options.fill_boundary == FillBoundary::kZero;
   sweeps = s > 1 ? options.fill_smoothing_sweeps : 0;
 }
 

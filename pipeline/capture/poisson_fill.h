@@ -76,6 +76,7 @@
 //      term.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <string>
 
@@ -84,6 +85,10 @@
 namespace crease {
 
 class OptionVisitor;
+
+// PoissonFillOptions::fill_boundary (see there).
+enum class FillBoundary { kZero, kNeumann };
+constexpr std::array<const char*, 2> OptionEnumNames(FillBoundary) { return {"zero", "neumann"}; }
 
 struct PoissonFillOptions {
   // Side of the coarse grid the Laplace system is factorised on, texels (not in the
@@ -96,7 +101,7 @@ struct PoissonFillOptions {
   // Condition at the edge of the domain (texels outside it and beyond the map):
   // "zero" (Dirichlet 0, the default for wrinkle displacement, see the header) or
   // "neumann" (zero normal derivative). Not specified in the paper (Difference 2).
-  std::string fill_boundary = "zero";
+  FillBoundary fill_boundary = FillBoundary::kZero;
   // Red-black Gauss–Seidel sweeps of the fine equations near the known texels
   // (Difference 1); 0 = the coarse field alone. Unused when the grid is not coarsened.
   int fill_smoothing_sweeps = 6;

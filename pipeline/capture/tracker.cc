@@ -17,8 +17,8 @@ void TrackerOptions::VisitFields(OptionVisitor& v) {
   v.Field("min_confidence", min_confidence);
   v.Field("confidence_scale_iod", confidence_scale_iod);
   v.Field("init_from_fit", init_from_fit);
-  fit.VisitFields(v);
-  dlib.VisitFields(v);
+  v.Section("fit", fit);
+  v.Section("dlib", dlib);
 }
 
 void TrackerOptions::Check() const {

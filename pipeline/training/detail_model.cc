@@ -41,7 +41,7 @@ void DetailModel::Validate(const std::string& what) const {
 
 void DetailModel::RegressBatch(float* patches, int N, float* c) const {
   const int n = pca.patch_pixels();
-  const std::string& mode = cascade.options.fern_texture_normalization;
+  const std::string mode = ToString(cascade.options.fern_texture_normalization);
   if (mode != "none") {
     for (int i = 0; i < N; ++i) NormalizeTexturePatch(patches + static_cast<size_t>(i) * n, n, mode);
   }
@@ -100,10 +100,10 @@ DetailModel ReadDetailModel(const std::filesystem::path& path) {
     Require(header.value("format", "") == "crease detail model",
             fmt::format("{}: header format is not \"crease detail model\"", what));
     m.map_resolution = header.at("map_resolution").get<int>();
-    SetOptionsFromJson(header.at("wrinkle").dump(), what + " (wrinkle options)", &m.wrinkle);
-    SetOptionsFromJson(header.at("patch").dump(), what + " (patch options)", &m.patch);
-    SetOptionsFromJson(header.at("detail").dump(), what + " (detail options)", &m.detail);
-    SetOptionsFromJson(header.at("ferns").dump(), what + " (fern options)", &m.cascade.options);
+    SetOptionsFromStoredJson(header.at("wrinkle").dump(), what + " (wrinkle options)", &m.wrinkle);
+    SetOptionsFromStoredJson(header.at("patch").dump(), what + " (patch options)", &m.patch);
+    SetOptionsFromStoredJson(header.at("detail").dump(), what + " (detail options)", &m.detail);
+    SetOptionsFromStoredJson(header.at("ferns").dump(), what + " (fern options)", &m.cascade.options);
     m.cascade.patch_pixels = header.at("patch_pixels").get<int>();
     m.cascade.dimensions = header.at("dimensions").get<int>();
     m.training_json = header.at("training").dump();

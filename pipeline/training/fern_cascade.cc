@@ -428,14 +428,14 @@ void SetFernAvx2Allowed(bool allowed) { g_avx2_allowed.store(allowed, std::memor
 
 void FernOptions::VisitFields(OptionVisitor& v) {
   v.Field("num_ferns", num_ferns);
-  v.Field("fern_depth", fern_depth);
+  v.Field("depth", fern_depth);
   v.Field("num_sampled_pixels", num_sampled_pixels);
   v.Field("shrinkage", shrinkage);
-  v.Field("fern_seed", fern_seed);
-  v.Field("fern_threshold_rule", fern_threshold_rule);
-  v.Field("fern_threshold_range", fern_threshold_range);
-  v.Field("fern_pair_selection", fern_pair_selection);
-  v.Field("fern_texture_normalization", fern_texture_normalization);
+  v.Field("seed", fern_seed);
+  v.Field("threshold_rule", fern_threshold_rule);
+  v.Field("threshold_range", fern_threshold_range);
+  v.Field("pair_selection", fern_pair_selection);
+  v.Field("texture_normalization", fern_texture_normalization);
 }
 
 void FernOptions::Check() const {
@@ -447,11 +447,8 @@ void FernOptions::Check() const {
   CheckLe(o, "num_sampled_pixels", num_sampled_pixels, 65536);
   CheckGe(o, "shrinkage", shrinkage, 0.0);
   Require(std::isfinite(shrinkage), fmt::format("FernOptions.shrinkage = {} must be finite", shrinkage));
-  CheckOneOf(o, "fern_threshold_rule", fern_threshold_rule, {"sample", "range"});
   CheckGt(o, "fern_threshold_range", fern_threshold_range, 0.0);
   CheckLe(o, "fern_threshold_range", fern_threshold_range, 1.0);
-  CheckOneOf(o, "fern_pair_selection", fern_pair_selection, {"correlation", "random"});
-  CheckOneOf(o, "fern_texture_normalization", fern_texture_normalization, {"none", "gain", "standardize"});
 }
 
 // ---------------------------------------------------------------------------
@@ -596,8 +593,8 @@ FernCascadeTrainer::FernCascadeTrainer(const Eigen::MatrixXf& patches, const Eig
       F(options.fern_depth),
       P(options.num_sampled_pixels),
       num_bins(1 << F),
-      correlation_(options.fern_pair_selection == "correlation"),
-      sample_threshold_(options.fern_threshold_rule == "sample"),
+      correlation_(options.fern_pair_selection == FernPairSelection::kCorrelation),
+      sample_threshold_(options.fern_threshold_rule == FernThresholdRule::kSample),
       blocks_(NumSampleBlocks(N)),
       c_hat_(targets),
       global_scatter_(correlation_ && n <= kGlobalScatterMaxPixels),

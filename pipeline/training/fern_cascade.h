@@ -68,6 +68,7 @@
 // Training N = 20,000, K = 1280, P = 50: 4.4 s on one core, 2.3 s on two.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -77,6 +78,14 @@
 namespace crease {
 
 class OptionVisitor;
+
+// FernOptions::fern_threshold_rule and fern_pair_selection (see there).
+enum class FernThresholdRule { kSample, kRange };
+constexpr std::array<const char*, 2> OptionEnumNames(FernThresholdRule) { return {"sample", "range"}; }
+enum class FernPairSelection { kCorrelation, kRandom };
+constexpr std::array<const char*, 2> OptionEnumNames(FernPairSelection) { return {"correlation", "random"}; }
+enum class TextureNormalization { kNone, kGain, kStandardize };
+constexpr std::array<const char*, 3> OptionEnumNames(TextureNormalization) { return {"none", "gain", "standardize"}; }
 
 using RowMatrixXf = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
@@ -90,16 +99,16 @@ struct FernOptions {
   //   "sample" — the feature value of a uniformly random training sample;
   //   "range"  — uniform in the central fern_threshold_range fraction of the feature's
   //              [min, max] over the training set.
-  std::string fern_threshold_rule = "sample";
+  FernThresholdRule fern_threshold_rule = FernThresholdRule::kSample;
   double fern_threshold_range = 0.2;  // "range" rule: central fraction of [min, max], (0, 1]
   // "correlation" (Cao et al. 2012, the paper) or "random" (ablation: a random pair of the P pixels).
-  std::string fern_pair_selection = "correlation";
+  FernPairSelection fern_pair_selection = FernPairSelection::kCorrelation;
   // The texture patch t_i the features read (NormalizeTexturePatch; not in the paper,
   // which feeds raw gray levels): "none" (the paper), "gain" (divided by the patch's
   // mean: shading = albedo × irradiance, so an actor's lighter or darker skin and the
   // exposure cancel) or "standardize" (zero mean, unit standard deviation: contrast
   // cancels too). Applies to the baselines as well.
-  std::string fern_texture_normalization = "none";
+  TextureNormalization fern_texture_normalization = TextureNormalization::kNone;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;

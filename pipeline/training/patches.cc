@@ -19,9 +19,9 @@
 namespace crease {
 
 void PatchLayoutOptions::VisitFields(OptionVisitor& v) {
-  v.Field("patch_size", patch_size);
-  v.Field("patch_density", patch_density);
-  v.Field("patch_max_outside_fraction", patch_max_outside_fraction);
+  v.Field("size", patch_size);
+  v.Field("density", patch_density);
+  v.Field("max_outside_fraction", patch_max_outside_fraction);
 }
 
 void PatchLayoutOptions::Check() const {

@@ -81,9 +81,9 @@ cv::Vec3f Diverging(float v) {
 
 }  // namespace
 
-void PcaOptions::VisitFields(OptionVisitor& v) { v.Field("pca_dimensions", dimensions); }
+void PcaOptions::VisitFields(OptionVisitor& v) { v.Field("dimensions", dimensions); }
 
-void PcaOptions::Check() const { CheckGe("PcaOptions", "pca_dimensions", dimensions, 1); }
+void PcaOptions::Check() const { CheckGe("PcaOptions", "dimensions", dimensions, 1); }
 
 void PatchPca::Project(const float* patch, float* coefficients) const {
   const int n = patch_pixels();

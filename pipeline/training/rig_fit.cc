@@ -29,7 +29,7 @@ void RigFitOptions::VisitFields(OptionVisitor& v) {
   v.Field("closest_point_metric", closest_point_metric);
   v.Field("max_correspondence_mm", max_correspondence_mm);
   v.Field("max_solver_iterations", max_solver_iterations);
-  v.Field("fit_seed", fit_seed);
+  v.Field("seed", fit_seed);
 }
 
 void RigFitOptions::Check() const {
@@ -40,7 +40,6 @@ void RigFitOptions::Check() const {
   CheckGt(o, "robust_scale_mm", robust_scale_mm, 0.0);
   CheckGe(o, "max_fit_vertices", max_fit_vertices, 10);
   CheckGe(o, "closest_point_iterations", closest_point_iterations, 1);
-  CheckOneOf(o, "closest_point_metric", closest_point_metric, {"point", "plane"});
   CheckGt(o, "max_correspondence_mm", max_correspondence_mm, 0.0);
   CheckGe(o, "max_solver_iterations", max_solver_iterations, 1);
 }
@@ -357,7 +356,7 @@ RigFitResult FitRigToScans(const FaceRig& rig, const std::vector<TriMesh>& scans
       blocks.push_back(pose[j].data());
       blocks.push_back(pose[j].data() + 3);
       for (const auto& [v, p, n] : pairs) {
-        const bool plane = !uv_mode && options.closest_point_metric == "plane";
+        const bool plane = !uv_mode && options.closest_point_metric == ClosestPointMetric::kPlane;
         problem.AddResidualBlock(new VertexResidual(rig, v, p, n, plane, scale),
                                  new ceres::HuberLoss(options.robust_scale_mm * scale), blocks);
       }
@@ -406,7 +405,7 @@ RigFitResult FitRigToScans(const FaceRig& rig, const std::vector<TriMesh>& scans
         const int q = nearest[j]->Find(x);
         if (q < 0) continue;
         const Eigen::Vector3d r = x - scans[j].V.row(q).transpose();
-        const double d = options.closest_point_metric == "plane" ? scan_normals[j].row(q).dot(r) : r.norm();
+        const double d = options.closest_point_metric == ClosestPointMetric::kPlane ? scan_normals[j].row(q).dot(r) : r.norm();
         se += d * d;
         ++n;
       }

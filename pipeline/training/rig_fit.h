@@ -24,6 +24,7 @@
 // units of their standard deviation, so λ_α is a Gaussian prior).
 #pragma once
 
+#include <array>
 #include <string>
 #include <vector>
 
@@ -35,6 +36,10 @@
 namespace crease {
 
 class OptionVisitor;
+
+// RigFitOptions::closest_point_metric: point-to-point or point-to-plane distances.
+enum class ClosestPointMetric { kPoint, kPlane };
+constexpr std::array<const char*, 2> OptionEnumNames(ClosestPointMetric) { return {"point", "plane"}; }
 
 struct RigFitOptions {
   // "uv", "closest", or "auto" (uv when the scans have UVs covering the rig's
@@ -51,7 +56,7 @@ struct RigFitOptions {
   int max_fit_vertices = 1000;
   // Closest-point path: outer iterations and the largest pair distance, mm.
   int closest_point_iterations = 6;
-  std::string closest_point_metric = "plane";  // "plane" or "point"
+  ClosestPointMetric closest_point_metric = ClosestPointMetric::kPlane;
   double max_correspondence_mm = 10.0;
   int max_solver_iterations = 50;
   uint64_t fit_seed = 7;

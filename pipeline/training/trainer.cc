@@ -30,14 +30,14 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 void TrainingOptions::VisitFields(OptionVisitor& v) {
-  detail.VisitFields(v);
-  fit.VisitFields(v);
-  texture.VisitFields(v);
-  wrinkle.VisitFields(v);
-  patch.VisitFields(v);
-  pca.VisitFields(v);
-  ferns.VisitFields(v);
-  baseline.VisitFields(v);
+  v.Section("detail", detail);
+  v.Section("fit", fit);
+  v.Section("texture", texture);
+  v.Section("wrinkle", wrinkle);
+  v.Section("patch", patch);
+  v.Section("pca", pca);
+  v.Section("ferns", ferns);
+  v.Section("baseline", baseline);
   v.Field("training_lights", training_lights);
   v.Field("max_actors", max_actors);
   v.Field("training_targets", training_targets);
@@ -53,7 +53,6 @@ void TrainingOptions::Check() const {
   pca.Check();
   ferns.Check();
   baseline.Check();
-  CheckOneOf("TrainingOptions", "training_targets", training_targets, {"extracted", "truth"});
   Require(!training_lights.empty(), "TrainingOptions.training_lights must be \"all\", \"first\" or light names");
   CheckGe("TrainingOptions", "max_actors", max_actors, 0);
   CheckGe("TrainingOptions", "validation_band_mm", validation_band_mm, 0.0);
@@ -378,7 +377,7 @@ cv::Mat ScanDisplacement(const ExtractionContext& ctx, const std::string& actor,
   ctx.sum.timing.Add("  M_0^j and normals", detail.seconds_aligned);
   ctx.sum.timing.Add("  rays (Embree)", detail.seconds_rays);
   cv::Mat D = detail.displacement;
-  if (ctx.options.training_targets == "truth") {
+  if (ctx.options.training_targets == TrainingTargets::kTruth) {
     Require(!scan.truth_displacement.empty() && !neutral_truth.empty(),
             fmt::format("{}: training_targets = truth needs the scan set's ground truth (a studio scan set)", name));
     D = ReadTruth(scan.truth_displacement, R) - neutral_truth;
@@ -439,8 +438,8 @@ TrainingPatches ActorPatchPairs(const ExtractionContext& ctx, const std::string&
                                 ActorTextures* textures, ActorSummary* as) {
   const TrainingOptions& options = ctx.options;
   const auto t0 = Clock::now();
-  if (options.wrinkle.texture_reference != "none")
-    FlattenByNeutral(options.wrinkle.texture_reference, textures->light, textures->coverage, &textures->gray);
+  if (options.wrinkle.texture_reference != TextureReference::kNone)
+    FlattenByNeutral(ToString(options.wrinkle.texture_reference), textures->light, textures->coverage, &textures->gray);
   cv::Mat coverage = detail_coverage.clone();
   for (const auto& c : textures->coverage) cv::bitwise_and(coverage, c, coverage);
   WrinkleMapBuilder builder(options.detail.map_resolution, coverage, ctx.rig.regions, options.wrinkle);
@@ -590,7 +589,7 @@ DetailModel TrainDetailModelFromPairs(const TrainingPairs& pairs, const Training
   if (pictures) fs::create_directories(outputs.report_dir);
   // The features' input (FernOptions::fern_texture_normalization; capture applies
   // the same in DetailModel::RegressBatch).
-  const Eigen::MatrixXf T = NormalizeTexturePatches(pairs.texture, options.ferns.fern_texture_normalization);
+  const Eigen::MatrixXf T = NormalizeTexturePatches(pairs.texture, ToString(options.ferns.fern_texture_normalization));
   const Eigen::MatrixXf& Dp = pairs.displacement;
   const int total_pairs = static_cast<int>(T.rows());
   const int n = options.patch.patch_size * options.patch.patch_size;
@@ -679,16 +678,17 @@ constexpr uint32_t kPairsVersion = 1;
 }  // namespace
 
 std::vector<std::string> RegressionOptionNames() {
-  std::vector<std::string> names = OptionFieldNames<PcaOptions>();
-  for (auto& n : OptionFieldNames<FernOptions>()) names.push_back(std::move(n));
-  for (auto& n : OptionFieldNames<PatchBaselineOptions>()) names.push_back(std::move(n));
+  std::vector<std::string> names;
+  for (const auto& n : OptionFieldNames<PcaOptions>()) names.push_back("pca." + n);
+  for (const auto& n : OptionFieldNames<FernOptions>()) names.push_back("ferns." + n);
+  for (const auto& n : OptionFieldNames<PatchBaselineOptions>()) names.push_back("baseline." + n);
   return names;
 }
 
 TrainingOptions OptionsForPairs(const TrainingPairs& pairs, const std::string& what,
                                 const std::function<void(TrainingOptions*)>& edit) {
   TrainingOptions options;
-  SetOptionsFromJson(pairs.options_json, what, &options);
+  SetOptionsFromStoredJson(pairs.options_json, what, &options);
   const TrainingOptions extracted = options;
   if (edit) edit(&options);
   json a = json::parse(OptionsToJson(extracted)), b = json::parse(OptionsToJson(options));

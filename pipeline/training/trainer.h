@@ -17,6 +17,7 @@
 // illumination limitation (Sec. 7, Fig. 14).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -39,6 +40,10 @@
 
 namespace crease {
 
+// TrainingOptions::training_targets (see there).
+enum class TrainingTargets { kExtracted, kTruth };
+constexpr std::array<const char*, 2> OptionEnumNames(TrainingTargets) { return {"extracted", "truth"}; }
+
 struct TrainingOptions {
   DetailExtractionOptions detail;  // Sec. 4.1
   RigFitOptions fit;               // Sec. 4.1
@@ -57,7 +62,7 @@ struct TrainingOptions {
   // (Sec. 4.1's D^j, the method) or "truth" (a studio scan set's ground-truth
   // expression displacement minus the neutral's: the wrinkle layer alone, to
   // separate what extraction contributes from what appearance allows).
-  std::string training_targets = "extracted";
+  TrainingTargets training_targets = TrainingTargets::kExtracted;
   // Validation against ground truth also in the wrinkle band: both maps minus
   // their Gaussian blur of this σ (mm on the face), which removes the broad
   // medium-frequency expression shape that D^j legitimately holds (the part of
@@ -151,8 +156,8 @@ DetailModel TrainDetailModelFromPairs(const TrainingPairs& pairs, const Training
                                       const TrainingOutputs& outputs, TrainingSummary* summary,
                                       const std::function<void(const std::string&)>& log = {});
 
-// The TrainingOptions fields only the regression reads (PcaOptions, FernOptions,
-// PatchBaselineOptions).
+// The TrainingOptions keys only the regression reads (its sections pca, ferns and
+// baseline: PcaOptions, FernOptions, PatchBaselineOptions).
 std::vector<std::string> RegressionOptionNames();
 
 // The pairs' options with `edit` applied; an edit of an extraction field throws

@@ -42,7 +42,6 @@ void WrinkleMapOptions::Check() const {
   CheckGe(o, "patch_exclude_margin", patch_exclude_margin, 0.0);
   CheckLe(o, "patch_exclude_margin", patch_exclude_margin, 1000.0);
   CheckLe(o, "orientation_smoothing_sigma", orientation_smoothing_sigma, 1000.0);
-  CheckOneOf(o, "texture_reference", texture_reference, {"none", "ratio", "difference"});
   for (size_t k = 0; k < patch_regions.size(); ++k) {
     Require(!patch_regions[k].empty(),
             fmt::format("WrinkleMapOptions.patch_regions[{}] is empty; expected a region name", k));

@@ -74,6 +74,7 @@
 //        capture, so the default stays the paper's "none".
 #pragma once
 
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
@@ -85,6 +86,10 @@
 namespace crease {
 
 class OptionVisitor;
+
+// WrinkleMapOptions::texture_reference (see there).
+enum class TextureReference { kNone, kRatio, kDifference };
+constexpr std::array<const char*, 3> OptionEnumNames(TextureReference) { return {"none", "ratio", "difference"}; }
 namespace internal {
 class DogFilter;  // wrinkle_map.cc: the DoG's normalised-convolution denominators
 }  // namespace internal
@@ -130,7 +135,7 @@ struct WrinkleMapOptions {
   // amplifies noise where T_ref is dark. The reference is the actor's neutral scan
   // in training and, in capture, the per-texel median of the wrinkle frames closest
   // to the neutral (MedianTexture).
-  std::string texture_reference = "none";
+  TextureReference texture_reference = TextureReference::kNone;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
