@@ -387,20 +387,8 @@ FlowStageErrors PoolFlowStages(const std::vector<FrameCaptureEval>& frames, int*
 // Accumulates LkFromTruth over the frames of a capture.
 class LkFromTruthMeter {
  public:
-  // `capture_options`: the capture's options (capture.json); the refinement's
-  // defaults for what they lack.
-  explicit LkFromTruthMeter(const json& capture_options) {
-    const json o = capture_options.is_object() ? capture_options : json::object();
-    // Section `refinement` of CaptureOptions (flat in captures from before option sections).
-    const auto get = [&o](const char* key, auto fallback) {
-      return o.value(std::string("refinement.") + key, o.value(key, fallback));
-    };
-    lk_.lk_window = get("lk_window", lk_.lk_window);
-    lk_.lk_pyramid_levels = get("lk_pyramid_levels", lk_.lk_pyramid_levels);
-    lk_.lk_max_iterations = get("lk_max_iterations", lk_.lk_max_iterations);
-    lk_.lk_epsilon_px = get("lk_epsilon_px", lk_.lk_epsilon_px);
-    lk_.lk_min_eigenvalue = get("lk_min_eigenvalue", lk_.lk_min_eigenvalue);
-  }
+  // `capture_options`: the capture's refinement options (capture.json: CaptureOptionsOf).
+  explicit LkFromTruthMeter(const FlowRefinementOptions& capture_options) : lk_(capture_options) {}
   // Frame `index` (8-bit gray) with its truth; `flow_vertex`: the capture's flow points.
   void Add(int index, const cv::Mat& gray8, const FrameTruth& truth, const std::vector<int>& flow_vertex) {
     if (index == previous_index_ + 1 && !previous_gray_.empty()) Measure(gray8, truth, flow_vertex);
@@ -465,20 +453,27 @@ cv::Mat ReadRgbFrame(const fs::path& path, bool linear) {
   return img;
 }
 
-// The capture's FrameTextureOptions: the fields of capture.json's "options" that the
-// struct knows (the rest belong to other stages), its defaults for the others; the
-// map resolution is the one the capture ran at (top-level "map_resolution": the
-// model's, which overrides the option).
-FrameTextureOptions CaptureTextureOptions(const json& capture_json, const std::string& what) {
+// The capture's options of one stage (T, CaptureOptions' section `section`): the
+// fields of capture.json's "options" that T knows (the rest belong to other
+// stages), its defaults for the others; checked by type, errors name the file.
+template <class T>
+T CaptureOptionsOf(const json& capture_json, const std::string& section, const std::string& what) {
   const json o = capture_json.value("options", json::object());
   json known = json::object();
-  for (const std::string& key : OptionFieldNames<FrameTextureOptions>()) {
-    // CaptureOptions' section `texture` (flat in captures from before option sections).
-    const std::string stored = o.contains("texture." + key) ? "texture." + key : key;
+  for (const std::string& key : OptionFieldNames<T>()) {
+    // CaptureOptions' section (flat in captures from before option sections).
+    const std::string stored = o.contains(section + "." + key) ? section + "." + key : key;
     if (o.contains(stored)) known[key] = o[stored];
   }
-  FrameTextureOptions t;
+  T t;
   SetOptionsFromJson(known.dump(), what, &t);
+  return t;
+}
+
+// The capture's FrameTextureOptions; the map resolution is the one the capture ran at
+// (top-level "map_resolution": the model's, which overrides the option).
+FrameTextureOptions CaptureTextureOptions(const json& capture_json, const std::string& what) {
+  FrameTextureOptions t = CaptureOptionsOf<FrameTextureOptions>(capture_json, "texture", what);
   t.map_resolution = capture_json.value("map_resolution", t.map_resolution);
   return t;
 }
@@ -675,7 +670,7 @@ void CaptureEvalContext::ReadInputs() {
   Require(fs::is_regular_file(capture_json),
           fmt::format("{}: missing; is {} a `crease capture` folder?", capture_json.string(), capture.string()));
   info = ReadSequenceDatasetInfo(dataset);
-  cap = ReadJsonFile(capture_json);
+  cap = ReadCaptureJson(capture_json);
   truth_rig = ReadRig(info.RigPath());
   rig = ReadRig(capture / "rig.crig");
   corr = CorrespondRigs(rig, truth_rig);
@@ -759,7 +754,7 @@ struct PreviousFrame {
 // What the frame loop accumulates over the frames.
 struct FrameLoopState {
   explicit FrameLoopState(const CaptureEvalContext& c)
-      : lk_meter(c.cap.contains("options") ? c.cap["options"] : json::object()) {
+      : lk_meter(CaptureOptionsOf<FlowRefinementOptions>(c.cap, "refinement", (c.capture / "capture.json").string())) {
     if (c.options.appearance.enabled && c.detail_truth) {
       appearance.emplace(c.capture, c.dataset, c.cap, c.rig, c.truth_rig, c.K, c.frames,
                          [&c](int index) { return c.FramePath(index); }, c.info, c.wrinkle_mask,

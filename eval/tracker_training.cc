@@ -320,6 +320,9 @@ std::vector<XmlTag> XmlTags(const std::string& text, const std::string& what) {
   return tags;
 }
 
+// Coordinates of a dlib XML file beyond this (pixels) are refused as corrupt.
+constexpr double kMaxXmlCoordinate = 1e6;
+
 double XmlNumber(const XmlTag& tag, const std::string& key, const std::string& what) {
   const std::string* v = tag.Find(key);
   Require(v != nullptr, fmt::format("{}:{}: <{}> has no '{}'", what, tag.line, tag.name, key));
@@ -402,6 +405,11 @@ std::vector<LabelledFace> ReadDlibXmlFaces(const fs::path& xml, const DlibXmlOpt
       const double width = XmlNumber(b, "width", what), height = XmlNumber(b, "height", what);
       Require(width > 0 && height > 0, fmt::format("{}:{}: <box> has an empty size", what, b.line));
       const double side = std::max(width, height);
+      // Issue 19 (dlib_xml_fuzzer): a box of 1e-300 px scaled the crop by 1e302 (infinite coordinates).
+      Require(side >= 1.0 && side <= kMaxXmlCoordinate && std::abs(top) <= kMaxXmlCoordinate &&
+                  std::abs(left) <= kMaxXmlCoordinate && parts.cwiseAbs().maxCoeff() <= kMaxXmlCoordinate,
+              fmt::format("{}:{}: <box> smaller than 1 px, or a coordinate beyond ±{} px", what, b.line,
+                          kMaxXmlCoordinate));
       const double s = options.box_px / side;
       const int crop = static_cast<int>(std::lround(options.crop_scale * options.box_px));
       const double cx = left + 0.5 * (width - 1.0), cy = top + 0.5 * (height - 1.0);

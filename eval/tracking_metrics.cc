@@ -32,6 +32,13 @@ FrameTruth ReadFrameTruth(const fs::path& dataset, int frame, int num_vertices) 
     const auto& c = j.at("cam_from_head");
     const auto q = c.at("rotation_wxyz").get<std::vector<double>>();
     const auto tr = c.at("translation_mm").get<std::vector<double>>();
+    // Issue 19 (truth_json_fuzzer): shorter arrays were read past their end.
+    Require(q.size() == 4 && tr.size() == 3,
+            fmt::format("{}: cam_from_head needs rotation_wxyz (4 numbers) and translation_mm (3), found {} and {}",
+                        jpath.string(), q.size(), tr.size()));
+    const double q_norm = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    Require(std::abs(q_norm - 1.0) < 1e-3,
+            fmt::format("{}: cam_from_head.rotation_wxyz is not a unit quaternion (norm {})", jpath.string(), q_norm));
     t.cam_from_head = Rigid3d(Eigen::Quaterniond(q[0], q[1], q[2], q[3]), Eigen::Vector3d(tr[0], tr[1], tr[2]));
     if (j.contains("identity")) {
       const auto a = j.at("identity").get<std::vector<double>>();

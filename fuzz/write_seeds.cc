@@ -2,7 +2,9 @@
 // writers, so the seeds are files crease writes (issue 19): tiny meshes (PLY binary
 // and ascii, OBJ, VTP binary and ascii with a field), images (PNG 8/16-bit, EXR
 // float/half), a rig in each storage mode (.crig), a detail model (.cdm), a landmark
-// tracker (.ctrk), training pairs (.cpr), a camera and an actor. Tiny on purpose:
+// tracker (.ctrk), training pairs (.cpr), a camera, an actor, a capture frame (.cfr,
+// tracked with flow points and lost), a capture.json and a frame's truth JSON (the
+// dlib XML seeds are text, in fuzz/corpus/dlib_xml_fuzzer/). Tiny on purpose:
 // small seeds give fast executions. Usage: write_seeds OUT (makes OUT/<target>/...).
 #include <cstdio>
 #include <filesystem>
@@ -14,11 +16,16 @@
 #include "core/face_rig.h"
 #include "core/image_io.h"
 #include "core/mesh_io.h"
+#include "core/file_util.h"
+#include "core/json_io.h"
 #include "core/vtk_io.h"
+#include "pipeline/capture/capture_io.h"
+#include "pipeline/capture/capture_run.h"
 #include "pipeline/capture/shape_regressor.h"
 #include "pipeline/training/detail_model.h"
 #include "pipeline/training/trainer.h"
 #include "synth/actor.h"
+#include "synth/dataset.h"
 
 namespace fs = std::filesystem;
 using namespace crease;
@@ -143,6 +150,50 @@ void WriteJsonSeeds(const fs::path& out) {
   WriteActor(out / "actor_json_fuzzer" / "actor.json", actor);
 }
 
+void WriteCaptureSeeds(const fs::path& out) {
+  CaptureFrameArrays a;
+  a.frame = 3;
+  a.tracked = true;
+  a.coarse = MatX3d::Constant(4, 3, 1.5);
+  a.refined = MatX3d::Constant(4, 3, 1.25);
+  a.landmarks = MatX2d::Constant(68, 2, 20.0);
+  a.flow_vertex = {0, 2};
+  a.flow_status = {0, 1};
+  a.flow_projected = a.flow_positions = a.flow_fitted = MatX2d::Constant(2, 2, 12.0);
+  WriteCaptureFrameArrays(out / "cfr_fuzzer" / "tracked.cfr", a);
+  CaptureFrameArrays lost;
+  lost.frame = 4;
+  WriteCaptureFrameArrays(out / "cfr_fuzzer" / "lost.cfr", lost);
+
+  CaptureSummary s;
+  s.input = "seq";
+  s.frames = s.tracked_frames = s.detail_frames = 2;
+  s.frame_indices = {30, 31};
+  s.map_resolution = 16;
+  s.detail_extraction_json = "{\"lowpass_bandwidth_mm\": 3.0}";
+  s.options_json = "{\"lk_window\": 21, \"map_resolution\": 16}";
+  s.timing = {{"texture T^t", 0.002, 2}};
+  s.identity = Eigen::VectorXd::Constant(2, 0.5);
+  WriteFileAtomic(out / "capture_json_fuzzer" / "capture.json", [&](std::ostream& o) { o << s.ToJson(); });
+}
+
+void WriteTruthSeed(const fs::path& out) {
+  FaceRig rig = TinyRig();
+  rig.landmarks.clear();
+  for (int i = 0; i < 68; ++i) rig.landmarks.push_back({"ibug_" + std::to_string(i), i % 4});
+  Actor actor;
+  actor.identity = Eigen::VectorXd::Constant(1, 0.5);
+  StudioFrameTruth t;
+  t.expression = Eigen::VectorXd::Constant(2, 0.25);
+  t.vertex_pixels = MatX2d::Constant(4, 2, 10.0);
+  t.vertex_visible = {1, 1, 0, 1};
+  t.landmark_pixels = MatX2d::Constant(68, 2, 11.0);
+  t.landmark_visible.assign(68, 1);
+  t.light_description = "studio";
+  WriteFrameTruth(out / "truth_json_fuzzer", "000000", t, rig, actor);
+  fs::remove(out / "truth_json_fuzzer" / "000000_vertices.bin");  // the target writes its own
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -159,6 +210,8 @@ int main(int argc, char** argv) {
     WriteTrackerSeed(out);
     WritePairsSeed(out);
     WriteJsonSeeds(out);
+    WriteCaptureSeeds(out);
+    WriteTruthSeed(out);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "write_seeds: %s\n", e.what());
     return 1;

@@ -26,10 +26,12 @@ declare -A dict=(
   [camera_json_fuzzer]=json [actor_json_fuzzer]=json [scans_json_fuzzer]=json [dataset_json_fuzzer]=json
   [experiment_yaml_fuzzer]=yaml [options_yaml_fuzzer]=yaml [sequence_yaml_fuzzer]=yaml
   [png_fuzzer]= [exr_fuzzer]=
+  [cfr_fuzzer]=array_file [capture_json_fuzzer]=json [truth_json_fuzzer]=json [dlib_xml_fuzzer]=xml
 )
 all=(ply_fuzzer obj_fuzzer vtp_fuzzer gltf_fuzzer png_fuzzer exr_fuzzer crig_fuzzer cdm_fuzzer ctrk_fuzzer
      cpr_fuzzer scans_json_fuzzer dataset_json_fuzzer camera_json_fuzzer actor_json_fuzzer
-     options_yaml_fuzzer experiment_yaml_fuzzer sequence_yaml_fuzzer)
+     options_yaml_fuzzer experiment_yaml_fuzzer sequence_yaml_fuzzer cfr_fuzzer capture_json_fuzzer
+     truth_json_fuzzer dlib_xml_fuzzer)
 targets=()
 for t in "$@"; do
   t="${t%_fuzzer}_fuzzer"

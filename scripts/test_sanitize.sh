@@ -41,7 +41,8 @@ if [ "$mode" = all ]; then
   suites+=(Sequence ScannedHead Experiment 'Actor\.MalformedJsonNamesFileAndField'
            'Actor\.JsonRoundTripRebuildsIdentically')
   fuzzers+=(exr_fuzzer gltf_fuzzer cdm_fuzzer ctrk_fuzzer cpr_fuzzer scans_json_fuzzer dataset_json_fuzzer
-            actor_json_fuzzer options_yaml_fuzzer experiment_yaml_fuzzer sequence_yaml_fuzzer)
+            actor_json_fuzzer options_yaml_fuzzer experiment_yaml_fuzzer sequence_yaml_fuzzer cfr_fuzzer
+            capture_json_fuzzer truth_json_fuzzer dlib_xml_fuzzer)
 fi
 
 start=$(date +%s)

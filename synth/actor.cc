@@ -326,6 +326,7 @@ Actor ActorFromJson(const std::string& text, const std::string& what) {
     r.Fail("version", fmt::format("= {} is not supported (expected {})", version, Actor::kFormatVersion));
   }
   Actor a;
+  a.source = what;
   a.seed = r.Unsigned(j, "", "seed");
   {
     const json& o = r.Get(j, "", "options");
@@ -431,9 +432,10 @@ ActorModel::ActorModel(const FaceRig& rig, const Actor& actor) : rig_(PersonalRi
   // An actor belongs to the rig it was made for (issue 19: 3 of 26 coefficients were
   // taken silently, the rest as zero).
   Require(actor_.identity.size() == rig_.num_identity(),
-          fmt::format("ActorModel: the actor has {} identity coefficients but the rig {} identity modes; an actor "
+          fmt::format("{}: the actor has {} identity coefficients but the rig {} identity modes; an actor "
                       "is made for one rig (crease synth actor --rig)",
-                      actor_.identity.size(), rig_.num_identity()));
+                      actor_.source.empty() ? "ActorModel" : actor_.source, actor_.identity.size(),
+                      rig_.num_identity()));
   const int R = actor_.options.resolution;
   anchors_ = ComputeFaceAnchors(rig_);
   layout_ = BuildHiResLayout(rig_, R);

@@ -117,6 +117,7 @@ struct Actor {
   MesoscopicParams mesoscopic;
   SkinParams skin;
   ExpressionDeviationParams expression_deviation;  // absent in older actor files: none
+  std::string source;          // the file it was read from (ActorFromJson's `what`), named by errors; not written
 };
 
 // The rig as this actor's face moves: `rig` with the actor's expression

@@ -72,6 +72,12 @@ std::string FrameName(int i) { return fmt::format("{:06d}", i); }
 
 }  // namespace
 
+void WriteFrameTruth(const fs::path& truth_dir, const std::string& name, const StudioFrameTruth& truth,
+                     const FaceRig& rig, const Actor& actor) {
+  WriteJsonFile(truth_dir / (name + ".json"), TruthToJson(truth, rig, actor));
+  WriteVertexTruth(truth_dir / (name + "_vertices.bin"), truth);
+}
+
 Eigen::VectorXd ParseExpressionSpec(const std::string& spec, const FaceRig& rig) {
   SequenceFrame f;
   size_t start = 0;
@@ -165,8 +171,7 @@ DatasetReport WriteSequenceDataset(const FaceRig& rig, const Actor& actor, const
       frame.image.srgb8.convertTo(srgb, CV_8U);
       WriteImage(dir / "frames" / (FrameName(i) + ".png"), srgb, {.srgb = false});
       if (options.write_exr) WriteImage(dir / "frames" / (FrameName(i) + ".exr"), frame.render.image);
-      WriteJsonFile(dir / "truth" / (FrameName(i) + ".json"), TruthToJson(frame.truth, rig, actor));
-      WriteVertexTruth(dir / "truth" / (FrameName(i) + "_vertices.bin"), frame.truth);
+      WriteFrameTruth(dir / "truth", FrameName(i), frame.truth, rig, actor);
       t_write.Stop();
       ScopedTimer t_maps(&timing, "write maps + passes");
       if (options.write_maps) {

@@ -107,6 +107,12 @@ DatasetReport WriteScanSet(const FaceRig& rig, const std::vector<uint64_t>& acto
                            const ActorOptions& actor_options, const ScanSetOptions& options,
                            const std::filesystem::path& out);
 
+// One frame's ground truth as WriteSequenceDataset writes it: TRUTH_DIR/NAME.json
+// (rig parameters, pose, landmarks) and TRUTH_DIR/NAME_vertices.bin (float32 x px,
+// y px, visible, one triple per coarse rig vertex); eval reads it (ReadFrameTruth).
+void WriteFrameTruth(const std::filesystem::path& truth_dir, const std::string& name, const StudioFrameTruth& truth,
+                     const FaceRig& rig, const Actor& actor);
+
 // Rebuilds the full high-resolution ground-truth surface of frame `frame` of a
 // sequence dataset (head frame, mm). Errors name the file that is missing or wrong.
 TriMesh RebuildDatasetFrameMesh(const std::filesystem::path& dataset, int frame);

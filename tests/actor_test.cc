@@ -450,6 +450,14 @@ TEST(Actor, MalformedJsonNamesFileAndField) {
   few.identity.conservativeResize(3);
   EXPECT_NE(testing::ErrorOf([&] { ActorModel model(rig, few); }).find("the actor has 3 identity coefficients but"),
             std::string::npos);
+  // Read from a file, the error names the file (the actor is what the user must fix).
+  const fs::path few_file = dir / "few.json";
+  WriteText(few_file, ActorToJson(few));
+  const Actor few_read = ReadActor(few_file);
+  EXPECT_EQ(few_read.source, few_file.string());
+  EXPECT_NE(testing::ErrorOf([&] { ActorModel model(rig, few_read); })
+                .find(few_file.string() + ": the actor has 3 identity coefficients but"),
+            std::string::npos);
 }
 
 // Looking at the result: writes wrinkle maps and raking-light renders of the

@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <limits>
@@ -21,6 +22,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/error.h"
+#include "core/file_util.h"
 #include "core/json_io.h"
 #include "core/options.h"
 #include "eval/tracking_metrics.h"
@@ -249,6 +251,58 @@ TEST(CaptureRun, NanTruthAndNanCapturesAreRefused) {
   a.tracked = false;  // a lost frame's arrays carry no claim
   WriteCaptureFrameArrays(dir / "f.cfr", a);
   EXPECT_NO_THROW(ReadCaptureFrameArrays(dir / "f.cfr"));
+}
+
+// Issue 19: a truth pose with short arrays was read past their end (truth_json_fuzzer);
+// capture.json without frame_indices, or with fields of the wrong type, was an
+// internal error without the file (capture_json_fuzzer). Both name file and field.
+TEST(CaptureRun, MalformedTruthPoseAndCaptureJsonNameTheField) {
+  const fs::path dir = testing::TestDir();
+  fs::create_directories(dir / "truth");
+  for (const char* f : {"000000.json", "000000_vertices.bin"}) fs::copy_file(TinySequence() / "truth" / f, dir / "truth" / f);
+  nlohmann::json truth = ReadJsonFile(dir / "truth" / "000000.json");
+  truth["cam_from_head"]["rotation_wxyz"] = {1.0};
+  WriteJsonFile(dir / "truth" / "000000.json", truth);
+  EXPECT_ERROR_HAS(ReadFrameTruth(dir, 0, -1), "000000.json: cam_from_head needs rotation_wxyz (4 numbers)");
+  truth["cam_from_head"]["rotation_wxyz"] = {0.0, 0.0, 0.0, 0.0};
+  WriteJsonFile(dir / "truth" / "000000.json", truth);
+  EXPECT_ERROR_HAS(ReadFrameTruth(dir, 0, -1), "rotation_wxyz is not a unit quaternion");
+
+  const fs::path cap = dir / "capture.json";
+  auto read_with = [&](const nlohmann::json& j) {
+    WriteJsonFile(cap, j);
+    return testing::ErrorOf([&] { ReadCaptureJson(cap); });
+  };
+  EXPECT_NE(read_with({{"map_resolution", 64}}).find(cap.string() + ": field 'frame_indices'"), std::string::npos);
+  EXPECT_NE(read_with({{"frame_indices", {0, -1}}}).find("not a frame number"), std::string::npos);
+  EXPECT_NE(read_with({{"frame_indices", {0}}, {"fps", "fast"}}).find("field 'fps' must be a number"),
+            std::string::npos);
+  EXPECT_NE(read_with({{"frame_indices", {0}}, {"map_resolution", 0}}).find("field 'map_resolution'"),
+            std::string::npos);
+  EXPECT_NE(read_with(nlohmann::json::array()).find("not a JSON object"), std::string::npos);
+  EXPECT_EQ(read_with({{"frame_indices", {0, 1}}, {"options", nlohmann::json::object()}}), "");
+}
+
+// Issue 19 (cfr_fuzzer): a .cfr header claiming 2^63 − 1 vertices overflowed 3 × n.
+TEST(CaptureRun, CfrVertexCountIsBounded) {
+  const fs::path dir = testing::TestDir();
+  CaptureFrameArrays a;
+  a.coarse = MatX3d::Zero(4, 3);
+  a.refined = MatX3d::Zero(4, 3);
+  WriteCaptureFrameArrays(dir / "f.cfr", a);
+  std::string bytes = ReadFileToString(dir / "f.cfr");
+  // The container: magic (8 bytes), version (u32), header length (u64), the JSON header.
+  uint64_t length = 0;
+  std::memcpy(&length, bytes.data() + 12, sizeof(length));
+  std::string header = bytes.substr(20, length);
+  const std::string from = "\"num_vertices\":4", to = "\"num_vertices\":9223372036854775807";
+  ASSERT_NE(header.find(from), std::string::npos) << header;
+  header.replace(header.find(from), from.size(), to);
+  const uint64_t new_length = header.size();
+  bytes.replace(20, length, header);
+  std::memcpy(bytes.data() + 12, &new_length, sizeof(new_length));
+  testing::WriteText(dir / "huge.cfr", bytes);
+  EXPECT_ERROR_HAS(ReadCaptureFrameArrays(dir / "huge.cfr"), "huge.cfr: num_vertices above");
 }
 
 TEST(CaptureRun, NoFramesIsAnError) {

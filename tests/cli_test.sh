@@ -53,6 +53,8 @@ bad "bad sequence yaml" "unknown field 'yawn'" "$crease" synth sequence --rig "$
 bad "unknown light" "unknown" "$crease" synth render --rig "$tmp/head.crig" --seed 1 --light disco -o "$tmp/x.png"
 printf '{"version": 1}' > "$tmp/bad_actor.json"
 bad "bad actor" "bad_actor.json" "$crease" synth render --rig "$tmp/head.crig" --actor "$tmp/bad_actor.json" -o "$tmp/x.png"
+python3 -c 'import json,sys; a=json.load(open(sys.argv[1])); a["identity"]=a["identity"][:3]; json.dump(a,open(sys.argv[2],"w"))' "$tmp/actor.json" "$tmp/few_identity.json"
+bad "actor of another rig" "few_identity.json: the actor has 3 identity coefficients" "$crease" synth render --rig "$tmp/head.crig" --actor "$tmp/few_identity.json" -o "$tmp/x.png"
 ok "render-scan" "$crease" synth render-scan --mesh "$tmp/e.obj" --albedo "$tmp/regions.png" --units mm --size 160x120 --samples 1 -o "$tmp/scan.png"
 bad "render-scan without texture" "tex.png: file does not exist" "$crease" synth render-scan --mesh "$tmp/e.obj" --albedo "$tmp/tex.png" -o "$tmp/x.png"
 bad "unknown actor option" "unknown option 'nope'" "$crease" synth actor --rig "$tmp/head.crig" --set nope=1 -o "$tmp/x.json"

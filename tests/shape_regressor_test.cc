@@ -258,6 +258,11 @@ TEST(ShapeRegressor, DlibXmlFacesAreCroppedAroundTheirBoxes) {
                                               parts + "</box></image>");
   EXPECT_NE(ErrorOf([&] { ReadDlibXmlFaces(dir / "missing.xml"); }).find("image 'nowhere.jpg' not found"),
             std::string::npos);
+  // Issue 19: a box of 1e-300 px scaled the crop to infinite coordinates.
+  testing::WriteText(dir / "tiny.xml", "<image file='photo.png'><box top='0' left='0' width='1e-300' height='1e-300'>" +
+                                           parts + "</box></image>");
+  EXPECT_NE(ErrorOf([&] { ReadDlibXmlFaces(dir / "tiny.xml"); }).find("tiny.xml:1: <box> smaller than 1 px"),
+            std::string::npos);
   testing::WriteText(dir / "empty.xml", "<dataset><images></images></dataset>");
   EXPECT_NE(ErrorOf([&] { ReadDlibXmlFaces(dir / "empty.xml"); }).find("no <box> with the 68 <part>s"),
             std::string::npos);

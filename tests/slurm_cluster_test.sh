@@ -66,7 +66,7 @@ dataset:
   scan_size: 320x240
   capture: false
 actor: {resolution: 256, surface_min_vertices: 20000}
-training: {map_resolution: 256}
+training: {detail.map_resolution: 256}
 sweep:
   values:
     training.ferns.num_ferns: [20, 40]

@@ -1,5 +1,7 @@
 #include "pipeline/capture/capture_io.h"
 
+#include <climits>
+#include <cstdint>
 #include <vector>
 
 #include <fmt/format.h>
@@ -7,6 +9,7 @@
 
 #include "core/array_file.h"
 #include "core/error.h"
+#include "core/json_io.h"
 
 namespace crease {
 
@@ -92,6 +95,10 @@ CaptureFrameArrays ReadCaptureFrameArrays(const std::filesystem::path& path) {
               header.contains("tracked") && header["tracked"].is_boolean() && header.contains("num_vertices") &&
               header["num_vertices"].is_number_integer() && header["num_vertices"].get<int64_t>() >= 0,
           fmt::format("{}: header lacks an integer frame, a boolean tracked or a count num_vertices", what));
+  // Issue 19 (cfr_fuzzer): a count near 2^63 overflowed 3 × n.
+  Require(header["num_vertices"].get<int64_t>() <= kMaxCaptureVertices &&
+              header["frame"].get<int64_t>() >= 0 && header["frame"].get<int64_t>() <= INT32_MAX,
+          fmt::format("{}: num_vertices above {} or a frame number outside [0, 2^31)", what, kMaxCaptureVertices));
   CaptureFrameArrays out;
   out.frame = header["frame"].get<int>();
   out.tracked = header["tracked"].get<bool>();
@@ -117,6 +124,31 @@ CaptureFrameArrays ReadCaptureFrameArrays(const std::filesystem::path& path) {
     out.flow_fitted = FromFloat<2>(file.Get<float>("flow_fitted", 2 * nf, what));
   }
   return out;
+}
+
+nlohmann::json ReadCaptureJson(const std::filesystem::path& path) {
+  const std::string what = path.string();
+  const nlohmann::json j = ReadJsonFile(path);
+  Require(j.is_object(), fmt::format("{}: not a JSON object (a `crease capture` summary)", what));
+  auto field = [&what](const char* key) { return fmt::format("{}: field '{}'", what, key); };
+  const auto frames = j.find("frame_indices");
+  Require(frames != j.end() && frames->is_array(), field("frame_indices") + " must be a list of frame numbers");
+  for (const nlohmann::json& f : *frames) {
+    Require(f.is_number_integer() && f.get<int64_t>() >= 0 && f.get<int64_t>() <= INT32_MAX,
+            field("frame_indices") + " holds a value that is not a frame number");
+  }
+  if (j.contains("map_resolution")) {
+    const nlohmann::json& r = j["map_resolution"];
+    Require(r.is_number_integer() && r.get<int64_t>() >= 1 && r.get<int64_t>() <= kMaxCaptureMapResolution,
+            field("map_resolution") + fmt::format(" must be an integer in [1, {}]", kMaxCaptureMapResolution));
+  }
+  for (const char* key : {"options", "detail_extraction", "timing"}) {
+    if (j.contains(key)) Require(j[key].is_object(), field(key) + " must be an object");
+  }
+  for (const char* key : {"fps", "tracking_share", "detail_share"}) {
+    if (j.contains(key)) Require(j[key].is_number(), field(key) + " must be a number");
+  }
+  return j;
 }
 
 }  // namespace crease

@@ -14,6 +14,8 @@
 #include <cstdint>
 #include <filesystem>
 
+#include <nlohmann/json_fwd.hpp>
+
 #include "core/types.h"
 #include "pipeline/capture/capture.h"
 
@@ -38,6 +40,17 @@ CaptureFrameArrays MakeCaptureFrameArrays(const CapturedFrame& frame);
 void WriteCaptureFrameArrays(const std::filesystem::path& path, const CaptureFrameArrays& frame);
 // Throws Error naming the file when it is missing, of another kind or version, or
 // its arrays disagree with the header.
+// Limits of what a capture file may claim (checked before anything is allocated).
+inline constexpr int64_t kMaxCaptureVertices = int64_t{1} << 28;
+inline constexpr int64_t kMaxCaptureMapResolution = 16384;
+
 CaptureFrameArrays ReadCaptureFrameArrays(const std::filesystem::path& path);
+
+// capture.json (CaptureSummary::ToJson) as `crease eval` reads it back: a JSON object
+// whose fields eval uses have the right type and range — frame_indices (required, a
+// list of frame numbers), map_resolution, the objects options, detail_extraction and
+// timing, the numbers fps, tracking_share and detail_share. Errors name the file and
+// the field.
+nlohmann::json ReadCaptureJson(const std::filesystem::path& path);
 
 }  // namespace crease
