@@ -12,11 +12,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 build="${CREASE_ASAN_BUILD_DIR:-$root/build-asan}"
 say() { printf '[crease asan] %s\n' "$*"; }
 
-export CCACHE_BASEDIR="$root" CCACHE_NOHASHDIR=1
-launcher=()
-if command -v ccache >/dev/null 2>&1; then
-  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
-fi
+source "$root/scripts/ccache_launcher.sh"
 if [ ! -f "$build/build.ninja" ]; then
   say "configuring the clang ASan+UBSan build in $build"
   cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \

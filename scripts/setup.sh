@@ -29,12 +29,7 @@ else
   say "all Debian packages of scripts/deps.txt are installed"
 fi
 
-# Paths relative to the checkout, so a fresh clone elsewhere still hits the compiler cache.
-export CCACHE_BASEDIR="$root" CCACHE_NOHASHDIR=1
-launcher=()
-if command -v ccache >/dev/null 2>&1; then
-  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache -DCMAKE_C_COMPILER_LAUNCHER=ccache)
-fi
+source "$root/scripts/ccache_launcher.sh"
 if [ ! -f "$build/build.ninja" ]; then
   say "configuring Release build in $build"
   cmake -S "$root" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release "${launcher[@]}"

@@ -336,7 +336,8 @@ ExtractedDetail DetailExtractor::Extract(const MatX3d& expression, const std::st
   }
   TriMesh aligned = m.neutral;
   aligned.V = out.aligned;
-  const MatX3d normals = VertexNormals(aligned);
+  out.aligned_normals = VertexNormals(aligned);
+  const MatX3d& normals = out.aligned_normals;
   out.seconds_aligned = since(t0);
   t0 = Clock::now();
   // 4. D^j: per texel, the signed distance along M_0^j's normal to M^j. The ray

@@ -93,6 +93,7 @@ struct ExtractedDetail {
   cv::Mat displacement;  // D^j: CV_32F R×R, mm, positive outwards (along M_0^j's normal); 0 where invalid
   cv::Mat valid;         // CV_8U R×R: 255 where the ray from M_0^j hit M^j
   MatX3d aligned;        // M_0^j vertex positions (#V×3, mm)
+  MatX3d aligned_normals;  // M_0^j unit vertex normals (#V×3)
   int rays_missed = 0;   // covered texels whose ray found no surface within max_displacement_mm
   // Seconds per sub-step: G^HF, G + deformation transfer, M_0^j and its normals, rays.
   double seconds_hf = 0, seconds_transfer = 0, seconds_aligned = 0, seconds_rays = 0;

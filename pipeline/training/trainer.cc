@@ -15,7 +15,6 @@
 #include "core/array_file.h"
 #include "core/camera.h"
 #include "core/error.h"
-#include "core/mesh_ops.h"
 #include "core/image_io.h"
 #include "core/picture.h"
 #include "core/mesh_io.h"
@@ -363,14 +362,15 @@ void WriteTexturePicture(const fs::path& report_dir, const std::string& actor, c
 // Sec. 4.1: D^j of one scan, timed; with training_targets = truth, the ground
 // truth instead. Where the scan set has ground truth (the expression's minus the
 // neutral's: D^j is relative to M_0^j, which carries the neutral's own detail,
-// static lines), D^j is compared with it; pictures. `aligned` receives M_0^j.
+// static lines), D^j is compared with it; pictures. `aligned_normals` receives
+// M_0^j's vertex normals.
 cv::Mat ScanDisplacement(const ExtractionContext& ctx, const std::string& actor, const ScanEntry& scan,
                          const DetailExtractor& extractor, const MatX3d& V, const std::string& name,
-                         const cv::Mat& neutral_truth, double mm_per_texel, MatX3d* aligned) {
+                         const cv::Mat& neutral_truth, double mm_per_texel, MatX3d* aligned_normals) {
   const int R = ctx.options.detail.map_resolution;
   const auto t0 = Clock::now();
   const ExtractedDetail detail = extractor.Extract(V, name);
-  *aligned = detail.aligned;
+  *aligned_normals = detail.aligned_normals;
   ctx.sum.timing.Add("detail extraction D^j", Since(t0));
   ctx.sum.timing.Add("  G^HF (conjugate gradients)", detail.seconds_hf);
   ctx.sum.timing.Add("  G + deformation transfer", detail.seconds_transfer);
@@ -400,15 +400,12 @@ cv::Mat ScanDisplacement(const ExtractionContext& ctx, const std::string& actor,
 
 // The textures T^j of one scan: one per selected light rig, from that rig's
 // images, appended to `textures` with the scan's displacement D. The view angle
-// is judged by the normals of M_0^j (`aligned`; texture_extraction.h, Difference 2).
+// is judged by M_0^j's normals (`view_normals`; texture_extraction.h, Difference 2).
 void ExtractScanTextures(const ExtractionContext& ctx, const std::string& actor, const ScanEntry& scan,
-                         const TriMesh& mesh, const MatX3d& aligned, const std::string& name, const UvRaster& raster,
-                         const cv::Mat& D, ActorTextures* textures) {
+                         const TriMesh& mesh, const MatX3d& view_normals, const std::string& name,
+                         const UvRaster& raster, const cv::Mat& D, ActorTextures* textures) {
   const auto t0 = Clock::now();
   const RayCaster caster(mesh, {}, name);
-  TriMesh smooth = mesh;
-  smooth.V = aligned;
-  const MatX3d view_normals = VertexNormals(smooth);
   for (const auto& light : ctx.lights) {
     std::vector<Camera> cams;
     std::vector<cv::Mat> images;
@@ -495,10 +492,10 @@ TrainingPatches ActorTrainingPairs(const ExtractionContext& ctx, const ScanActor
   ActorTextures textures;
   for (size_t j = 0; j < meshes.size(); ++j) {
     const ScanEntry& scan = actor.scans[order[j]];
-    MatX3d aligned;
+    MatX3d view_normals;
     const cv::Mat D = ScanDisplacement(ctx, actor.name, scan, extractor, meshes[j].V, names[j], neutral_truth,
-                                       mm_per_texel, &aligned);
-    ExtractScanTextures(ctx, actor.name, scan, meshes[j], aligned, names[j], raster, D, &textures);
+                                       mm_per_texel, &view_normals);
+    ExtractScanTextures(ctx, actor.name, scan, meshes[j], view_normals, names[j], raster, D, &textures);
     progress.Advance();
   }
   as->textures = static_cast<int>(textures.gray.size());
