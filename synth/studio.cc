@@ -11,6 +11,7 @@
 #include <string_view>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -108,6 +109,7 @@ void StudioOptions::VisitFields(OptionVisitor& v) {
   v.Field("motion_blur_subframes", motion_blur_subframes);
   v.Field("shutter", shutter);
   v.Field("occluder", occluder);
+  v.Field("background", background);
   v.Field("seed", seed);
   v.Section("sensor", sensor);
 }
@@ -129,6 +131,10 @@ void StudioOptions::Check() const {
   CheckGe(o, "motion_blur_subframes", motion_blur_subframes, 1);
   CheckGt(o, "shutter", shutter, 0.0);
   CheckLe(o, "shutter", shutter, 1.0);
+  Require(background.size() == 3 && std::all_of(background.begin(), background.end(),
+                                                 [](double c) { return std::isfinite(c) && c >= 0.0; }),
+          fmt::format("StudioOptions: background needs 3 finite values >= 0 (linear RGB), got {}",
+                      fmt::join(background, ",")));
   LightRigFromSpec(light);  // throws for unknown presets and unreadable maps, naming them
   sensor.Check();
 }
@@ -544,7 +550,7 @@ StudioFrame Studio::Render(const Eigen::VectorXd& expression, const SequenceFram
   ro.samples_per_axis = options_.samples_per_axis;
   ro.subsurface_mm = options_.subsurface_mm;
   ro.passes = true;
-  ro.background = {0.02, 0.02, 0.025};
+  ro.background = options_.background;
   Rng rng = Rng(options_.seed).Fork(seed);
   if (motion_blur && sequence && options_.motion_blur_subframes > 1) {
     // Over the shutter the head moves (pose sampled from the sequence); the

@@ -59,6 +59,8 @@ struct StudioOptions {
   int motion_blur_subframes = 5;    // sub-frames over the shutter when the sequence asks for motion blur
   double shutter = 0.5;             // shutter interval as a fraction of the frame time
   bool occluder = true;             // add the occluder sphere when the sequence keys one
+  // Linear RGB of what rays that miss the head see (the studio's wall behind the actor).
+  std::vector<double> background = {0.02, 0.02, 0.025};
   SensorOptions sensor;
   uint64_t seed = 1;                // noise seed (frame i uses a stream derived from it and i)
 

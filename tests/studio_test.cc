@@ -70,9 +70,16 @@ TEST(Studio, GroundTruthProjectionsLandOnTheRenderedFace) {
   StudioOptions so;
   so.width = 320;
   so.height = 240;
+  so.background = {0.3, 0.2, 0.1};
   const Studio studio(SampleRig(), actor, so);
   const StudioFrame f = studio.RenderStill(Eigen::VectorXd::Zero(SampleRig().num_expressions()), SequenceFrame{},
                                            nullptr, nullptr, 1);
+  // Rays that miss the head see the studio's wall (StudioOptions::background).
+  ASSERT_EQ(f.render.alpha.at<float>(0, 0), 0.0f);
+  EXPECT_NEAR(f.render.image.at<cv::Vec3f>(0, 0)[0], 0.3f, 1e-6);
+  EXPECT_NEAR(f.render.image.at<cv::Vec3f>(0, 0)[2], 0.1f, 1e-6);
+  so.background = {0.1, 0.1};
+  EXPECT_NE(ErrorOf([&] { so.Check(); }).find("background needs 3"), std::string::npos);
   ASSERT_EQ(f.truth.landmark_pixels.rows(), 68);
   int visible = 0;
   for (int i = 0; i < 68; ++i) {
