@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <fstream>
 #include <vector>
 #include <fmt/format.h>
 #include <OpenImageIO/filesystem.h>
@@ -25,6 +27,66 @@ bool IsFloatFormat(const std::string& ext) {
   return ext == ".exr" || ext == ".hdr" || ext == ".pfm";
 }
 
+// A NUL-terminated name or type of an EXR header attribute (at most 255 characters).
+std::string ReadExrHeaderString(std::istream& in, const fs::path& path, const char* what) {
+  std::string s;
+  for (char c; in.get(c);) {
+    if (c == '\0') return s;
+    if (s.size() == 255) {
+      throw Error(fmt::format("{}: EXR header: an attribute {} longer than 255 bytes", path.string(), what));
+    }
+    s.push_back(c);
+  }
+  throw Error(fmt::format("{}: EXR header ends inside an attribute {}", path.string(), what));
+}
+
+// OpenEXR allocates a header attribute at the size its header states before reading
+// it, so a 347-byte file whose string attribute claims 1.9 GB took 2 GB and 24 s to
+// fail (issue 19, fuzz/regressions/exr_fuzzer). Before OpenImageIO opens an OpenEXR
+// file (magic 76 2f 31 01; others pass), its header (every part's, for multi-part
+// files) is walked: an attribute larger than the rest of the file, a name or type
+// without its NUL, or a data window of more than kMaxImagePixels pixels is an Error
+// naming the file and the attribute.
+void CheckExrHeader(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  char magic[4] = {};
+  uint32_t version = 0;
+  if (!in.read(magic, 4) || std::memcmp(magic, "\x76\x2f\x31\x01", 4) != 0) return;
+  if (!in.read(reinterpret_cast<char*>(&version), 4)) {
+    throw Error(fmt::format("{}: EXR file ends in its version field", path.string()));
+  }
+  const bool multipart = (version & 0x1000u) != 0;
+  const int64_t file_size = static_cast<int64_t>(fs::file_size(path));
+  for (bool part_empty = false; !part_empty;) {
+    part_empty = true;
+    for (std::string name; !(name = ReadExrHeaderString(in, path, "name")).empty();) {
+      part_empty = false;
+      const std::string type = ReadExrHeaderString(in, path, "type");
+      int32_t size = 0;
+      if (!in.read(reinterpret_cast<char*>(&size), 4)) {
+        throw Error(fmt::format("{}: EXR header ends in the size of attribute '{}'", path.string(), name));
+      }
+      const int64_t rest = file_size - static_cast<int64_t>(in.tellg());
+      if (size < 0 || size > rest) {
+        throw Error(fmt::format("{}: EXR attribute '{}' ({}) claims {} bytes, but the file has {} left",
+                                path.string(), name, type, size, rest));
+      }
+      if (name == "dataWindow" && type == "box2i" && size == 16) {
+        int32_t box[4];
+        in.read(reinterpret_cast<char*>(box), 16);
+        const int64_t w = int64_t{box[2]} - box[0] + 1, h = int64_t{box[3]} - box[1] + 1;
+        if (w < 1 || h < 1 || w * h > kMaxImagePixels) {
+          throw Error(fmt::format("{}: the EXR data window claims {}x{} pixels (1 to {} are read)", path.string(),
+                                  w, h, kMaxImagePixels));
+        }
+      } else {
+        in.seekg(size, std::ios::cur);
+      }
+    }
+    if (!multipart) break;
+  }
+}
+
 // Encodes `data` (CV_32F, continuous) as `spec` with `out`, opened as `name`; errors
 // name `path`.
 void Encode(OIIO::ImageOutput& out, const std::string& name, const OIIO::ImageSpec& spec, const cv::Mat& data,
@@ -43,6 +105,7 @@ void Encode(OIIO::ImageOutput& out, const std::string& name, const OIIO::ImageSp
 
 cv::Mat ReadImage(const fs::path& path, bool srgb) {
   RequireReadableFile(path);
+  CheckExrHeader(path);
   auto in = OIIO::ImageInput::open(path.string());
   if (!in) {
     throw Error(fmt::format("{}: cannot read image: {}", path.string(), OIIO::geterror()));

@@ -25,7 +25,8 @@ struct ImageWriteOptions {
 // Reads any format OIIO reads. Returns CV_32FC(n), n = the file's channel count.
 // 8/16-bit files are decoded from sRGB to linear unless `srgb` is false.
 // Errors name the file: missing, unreadable, unsupported, truncated, or a header
-// claiming more than 10^8 pixels (checked before decoding).
+// claiming more than 10^8 pixels (checked before decoding), an EXR header attribute
+// claiming more bytes than the file holds (checked before OpenEXR allocates it).
 cv::Mat ReadImage(const std::filesystem::path& path, bool srgb = true);
 
 // Writes a CV_32F or CV_8U image (1, 3 or 4 channels); the format follows the

@@ -31,16 +31,14 @@ tests=(tri_mesh_test mesh_ops_test mesh_io_test file_util_test vtk_io_test optio
 suites=(TriMesh CotangentLaplacian GeodesicDistance MassMatrix MeshLowpass MeshOpsSeams VertexNormals
         MeshIo Obj Ply FileUtil AnyMesh Pvd Vtp Options Rng Camera FaceRig RigImport Progress Timer Ibug
         JsonIo ImageIo RayCaster SphereTest DatasetInfo)
-# exr_fuzzer only in `all`: its open finding (fuzz/findings/exr_fuzzer: a 347-byte EXR
-# makes OpenEXR allocate 2.3 GB) would turn CI red by chance, not by a change.
-fuzzers=(ply_fuzzer obj_fuzzer vtp_fuzzer png_fuzzer crig_fuzzer camera_json_fuzzer)
+fuzzers=(ply_fuzzer obj_fuzzer vtp_fuzzer png_fuzzer exr_fuzzer crig_fuzzer camera_json_fuzzer)
 if [ "$mode" = all ]; then
   tests+=(sequence_test actor_test scanned_head_test experiment_test)
   # Left out as too slow under ASan: UvRaster (two tests over 120 s each) and the Actor
   # tests that build and render whole actors (40-100 s each); Actor's JSON tests stay.
   suites+=(Sequence ScannedHead Experiment 'Actor\.MalformedJsonNamesFileAndField'
            'Actor\.JsonRoundTripRebuildsIdentically')
-  fuzzers+=(exr_fuzzer gltf_fuzzer cdm_fuzzer ctrk_fuzzer cpr_fuzzer scans_json_fuzzer dataset_json_fuzzer
+  fuzzers+=(gltf_fuzzer cdm_fuzzer ctrk_fuzzer cpr_fuzzer scans_json_fuzzer dataset_json_fuzzer
             actor_json_fuzzer options_yaml_fuzzer experiment_yaml_fuzzer sequence_yaml_fuzzer cfr_fuzzer
             capture_json_fuzzer truth_json_fuzzer dlib_xml_fuzzer)
 fi

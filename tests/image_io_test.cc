@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <chrono>
+#include <cstring>
 #include <fstream>
 #include <thread>
 #include <csignal>
@@ -12,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/rng.h"
+#include "tests/test_util.h"
 
 namespace crease {
 namespace {
@@ -121,6 +123,33 @@ TEST(ImageIo, ExrPngRoundTripsSrgbAndErrors) {
 // PNG (OIIO's PNG writer does not report the failed write). A file size limit
 // (RLIMIT_FSIZE, each ctest test is its own process) stands in for the full disk:
 // every format must throw, naming the file, and leave neither it nor a temporary.
+// Issue 19: a 347-byte EXR whose capDate attribute claims 1.9 GB made OpenEXR allocate
+// 2 GB (24 s) before failing; the header walk refuses it before OpenImageIO opens it.
+TEST(ImageIo, ExrAttributeLargerThanTheFileIsRefusedFirst) {
+  const fs::path bad = fs::path(CREASE_TEST_DIR) / "../fuzz/regressions/exr_fuzzer/attribute_claims_2gb.exr";
+  const std::string e = testing::ErrorOf([&] { ReadImage(bad); });
+  EXPECT_NE(e.find("attribute_claims_2gb.exr: EXR attribute 'capDate' (string) claims 1946157075 bytes"),
+            std::string::npos) << e;
+  // A data window beyond 10^8 pixels: a valid file with its dataWindow's xMax raised.
+  const fs::path dir = fs::path(::testing::TempDir()) / "crease_image_io";
+  const fs::path good = dir / "window.exr";
+  WriteImage(good, RandomImage(4, 4, 1, 3));
+  std::string bytes;
+  {
+    std::ifstream in(good, std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const size_t at = bytes.find("dataWindow");
+  ASSERT_NE(at, std::string::npos);
+  const size_t x_max = at + std::string("dataWindow").size() + 1 + std::string("box2i").size() + 1 + 4 + 8;
+  const int32_t huge = 2'000'000'000;
+  std::memcpy(&bytes[x_max], &huge, 4);
+  const fs::path wide = dir / "window_wide.exr";
+  std::ofstream(wide, std::ios::binary) << bytes;
+  EXPECT_NE(testing::ErrorOf([&] { ReadImage(wide); }).find("data window claims 2000000001x4 pixels"), std::string::npos);
+  EXPECT_EQ(ReadImage(good).rows, 4);  // the walk accepts crease's own files
+}
+
 TEST(ImageIo, FullDiskIsAnErrorAndLeavesNoFile) {
   const fs::path dir = fs::path(::testing::TempDir()) / "crease_image_full";
   fs::remove_all(dir);
