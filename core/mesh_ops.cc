@@ -24,19 +24,6 @@ Eigen::Vector3d Corner(const TriMesh& mesh, int f, int k) {
   return mesh.V.row(mesh.F(f, k)).transpose();
 }
 
-void RequireFaceIndices(const TriMesh& mesh, const char* what) {
-  const int nv = mesh.num_vertices();
-  for (int f = 0; f < mesh.num_faces(); ++f) {
-    for (int k = 0; k < 3; ++k) {
-      const int v = mesh.F(f, k);
-      if (v < 0 || v >= nv) {
-        throw Error(fmt::format("{}: triangle {} references vertex {}, but the mesh has {} vertices",
-                                what, f, v, nv));
-      }
-    }
-  }
-}
-
 // Vertices on a boundary edge (an edge used by exactly one triangle).
 std::vector<char> BoundaryMask(const TriMesh& mesh) {
   std::vector<std::pair<int, int>> edges;
