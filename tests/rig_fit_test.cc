@@ -13,13 +13,9 @@
 namespace crease {
 namespace {
 
-const FaceRig& Rig() { return testing::ProceduralRig(); }
+using testing::ExpressionWeights;
 
-Eigen::VectorXd Weights(const FaceRig& rig, std::initializer_list<std::pair<const char*, double>> w) {
-  Eigen::VectorXd e = Eigen::VectorXd::Zero(rig.num_expressions());
-  for (const auto& [name, value] : w) e[rig.ExpressionIndex(name)] = value;
-  return e;
-}
+const FaceRig& Rig() { return testing::ProceduralRig(); }
 
 // Scans made by the rig itself: a known identity, known expressions, moved by a
 // known pose (scan_from_head).
@@ -36,8 +32,8 @@ KnownScans MakeScans(const FaceRig& rig, const Rigid3d& pose, bool with_uv) {
   k.identity[0] = 1.2;
   k.identity[3] = -0.8;
   k.expressions = {Eigen::VectorXd::Zero(rig.num_expressions()),
-                   Weights(rig, {{"browInnerUp_L", 0.9}, {"browInnerUp_R", 0.9}}),
-                   Weights(rig, {{"mouthSmile_L", 0.6}, {"jawOpen", 0.3}})};
+                   ExpressionWeights(rig, {{"browInnerUp_L", 0.9}, {"browInnerUp_R", 0.9}}),
+                   ExpressionWeights(rig, {{"mouthSmile_L", 0.6}, {"jawOpen", 0.3}})};
   for (size_t j = 0; j < k.expressions.size(); ++j) {
     TriMesh m = rig.Evaluate(k.identity, k.expressions[j]);
     for (int v = 0; v < m.num_vertices(); ++v) m.V.row(v) = (pose * Eigen::Vector3d(m.V.row(v))).transpose();
