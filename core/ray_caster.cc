@@ -82,10 +82,13 @@ class SharedDevice {
   RTCDevice device_ = nullptr;
 };
 
-RTCBuildQuality ParseBuildQuality(const std::string& quality) {
-  if (quality == "low") return RTC_BUILD_QUALITY_LOW;
-  if (quality == "high") return RTC_BUILD_QUALITY_HIGH;
-  return RTC_BUILD_QUALITY_MEDIUM;  // "medium"; other values are rejected by Check()
+RTCBuildQuality EmbreeBuildQuality(BvhBuildQuality quality) {
+  switch (quality) {
+    case BvhBuildQuality::kLow: return RTC_BUILD_QUALITY_LOW;
+    case BvhBuildQuality::kMedium: return RTC_BUILD_QUALITY_MEDIUM;
+    case BvhBuildQuality::kHigh: return RTC_BUILD_QUALITY_HIGH;
+  }
+  return RTC_BUILD_QUALITY_MEDIUM;
 }
 
 constexpr int kPacketSize = 16;          // rtcIntersect16 / rtcOccluded16
@@ -118,7 +121,7 @@ void RayCasterOptions::VisitFields(OptionVisitor& v) {
 }
 
 void RayCasterOptions::Check() const {
-  CheckOneOf("RayCasterOptions", "build_quality", build_quality, {"low", "medium", "high"});
+  // Every value of every field is valid (build_quality is an enum).
 }
 
 // ---- RayCaster ----------------------------------------------------------------
@@ -285,7 +288,7 @@ RayCaster::RayCaster(const TriMesh& mesh, const RayCasterOptions& options, const
   // Embree honours a per-geometry quality (here: refit) only in its two-level
   // mode, i.e. with scene build quality low (rtcSetGeometryBuildQuality(3)).
   rtcSetSceneBuildQuality(m.scene, options.dynamic ? RTC_BUILD_QUALITY_LOW
-                                                   : ParseBuildQuality(options.build_quality));
+                                                   : EmbreeBuildQuality(options.build_quality));
   ThrowIfEmbreeError(m.device, "rtcSetSceneBuildQuality");
 
   m.geometry = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_TRIANGLE);
