@@ -6,6 +6,7 @@
 
 #include <cmath>
 
+#include "core/options.h"
 #include "synth/procedural_rig.h"
 #include "tests/synth_test_util.h"
 #include "tests/test_util.h"
@@ -53,7 +54,7 @@ TEST(RigFit, UvCorrespondencesRecoverIdentityAndExpressions) {
   o.expression_prior = 0.0;
   o.max_fit_vertices = 800;
   const RigFitResult r = FitRigToScans(rig, k.scans, k.names, o);
-  EXPECT_EQ(r.correspondence, "uv");
+  EXPECT_EQ(r.correspondence, RigCorrespondence::kUv);
   for (double rms : r.rms_mm) EXPECT_LT(rms, 0.05);
   EXPECT_LT((r.identity - k.identity).cwiseAbs().maxCoeff(), 0.1);
   for (size_t j = 0; j < k.expressions.size(); ++j) {
@@ -75,7 +76,7 @@ TEST(RigFit, ClosestPointsRecoverAPoseFromRoughAlignment) {
   o.max_fit_vertices = 600;
   o.closest_point_iterations = 4;
   const RigFitResult r = FitRigToScans(rig, k.scans, k.names, o);
-  EXPECT_EQ(r.correspondence, "closest");
+  EXPECT_EQ(r.correspondence, RigCorrespondence::kClosest);
   for (size_t j = 0; j < k.scans.size(); ++j) {
     // Point-to-plane against the nearest vertex of a coarse (2 mm) mesh: ~0.1 mm of
     // curvature error remains even at the exact pose.
@@ -112,10 +113,10 @@ TEST(RigFit, BadInput) {
   const FaceRig& rig = Rig();
   KnownScans k = MakeScans(rig, Rigid3d(), true);
   RigFitOptions o;
-  o.correspondence = "nearest";
-  EXPECT_ERROR_HAS(o.Check(), "correspondence");
+  EXPECT_ERROR_HAS(SetOptionsFromJson(R"({"correspondence": "nearest"})", "test", &o),
+                   "test: option 'correspondence' must be one of: auto, uv, closest, got \"nearest\"");
   RigFitOptions far;
-  far.correspondence = "closest";
+  far.correspondence = RigCorrespondence::kClosest;
   for (auto& m : k.scans) m.V.array() += 500.0;  // nowhere near the rig
   EXPECT_ERROR_HAS(FitRigToScans(rig, k.scans, k.names, far), "roughly aligned");
 }
