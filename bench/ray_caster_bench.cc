@@ -198,7 +198,8 @@ BENCHMARK(BM_SignedBothWays)->ArgNames({"threads", "ordered"})->ArgsProduct({{1,
 void BM_BuildBvh(benchmark::State& state) {
   const TriMesh& mesh = Sphere();
   RayCasterOptions options;
-  const char* qualities[] = {"low", "medium", "high", "medium"};
+  const BvhBuildQuality qualities[] = {BvhBuildQuality::kLow, BvhBuildQuality::kMedium, BvhBuildQuality::kHigh,
+                                       BvhBuildQuality::kMedium};
   options.build_quality = qualities[state.range(1)];
   options.dynamic = state.range(1) == 3;
   const auto limit = Threads(state);
@@ -207,7 +208,7 @@ void BM_BuildBvh(benchmark::State& state) {
     benchmark::DoNotOptimize(&caster);
   }
   state.SetItemsProcessed(state.iterations() * mesh.num_faces());  // triangles
-  state.SetLabel(options.dynamic ? "dynamic" : options.build_quality);
+  state.SetLabel(options.dynamic ? "dynamic" : ToString(options.build_quality));
 }
 BENCHMARK(BM_BuildBvh)->ArgNames({"threads", "quality"})->ArgsProduct({{1, 2}, {0, 1, 2, 3}})
     ->Unit(benchmark::kMillisecond)->UseRealTime();

@@ -73,7 +73,7 @@ void BM_TrackRegressor(benchmark::State& state) {
     return;
   }
   TrackerOptions o;
-  o.landmark_source = "regressor";
+  o.landmark_source = LandmarkSourceKind::kRegressor;
   o.tracker_model = path;
   RunTracker(state, MakeLandmarkSource(o), o);
 }

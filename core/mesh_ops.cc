@@ -24,19 +24,6 @@ Eigen::Vector3d Corner(const TriMesh& mesh, int f, int k) {
   return mesh.V.row(mesh.F(f, k)).transpose();
 }
 
-void RequireFaceIndices(const TriMesh& mesh, const char* what) {
-  const int nv = mesh.num_vertices();
-  for (int f = 0; f < mesh.num_faces(); ++f) {
-    for (int k = 0; k < 3; ++k) {
-      const int v = mesh.F(f, k);
-      if (v < 0 || v >= nv) {
-        throw Error(fmt::format("{}: triangle {} references vertex {}, but the mesh has {} vertices",
-                                what, f, v, nv));
-      }
-    }
-  }
-}
-
 // Vertices on a boundary edge (an edge used by exactly one triangle).
 std::vector<char> BoundaryMask(const TriMesh& mesh) {
   std::vector<std::pair<int, int>> edges;
@@ -188,20 +175,6 @@ SpMat CotangentLaplacian(const TriMesh& mesh) {
   return L;
 }
 
-std::string ToString(MassMatrixType type) {
-  switch (type) {
-    case MassMatrixType::kBarycentric: return "barycentric";
-    case MassMatrixType::kVoronoi: return "voronoi";
-  }
-  return "unknown";
-}
-
-MassMatrixType MassMatrixTypeFromString(const std::string& name) {
-  if (name == "barycentric") return MassMatrixType::kBarycentric;
-  if (name == "voronoi") return MassMatrixType::kVoronoi;
-  throw Error(fmt::format("unknown mass matrix type '{}' (expected barycentric or voronoi)", name));
-}
-
 SpMat MassMatrix(const TriMesh& mesh, MassMatrixType type) {
   RequireFaceIndices(mesh, "MassMatrix");
   const int nv = mesh.num_vertices();
@@ -260,9 +233,6 @@ void LowpassOptions::Check() const {
   CheckGe("LowpassOptions", "bandwidth_mm", bandwidth_mm, 0.0);
   CheckLt("LowpassOptions", "bandwidth_mm", bandwidth_mm, std::numeric_limits<double>::infinity());
   CheckGe("LowpassOptions", "steps", steps, 1);
-  CheckOneOf("LowpassOptions", "mass_matrix", mass_matrix, {"barycentric", "voronoi"});
-  CheckOneOf("LowpassOptions", "boundary", boundary, {"natural", "fixed"});
-  CheckOneOf("LowpassOptions", "solver", solver, {"direct", "iterative"});
   CheckGt("LowpassOptions", "iterative_tolerance", iterative_tolerance, 0.0);
   CheckLt("LowpassOptions", "iterative_tolerance", iterative_tolerance, 1e-2);
 }
@@ -303,18 +273,18 @@ MeshLowpass::MeshLowpass(const TriMesh& input_mesh, const LowpassOptions& option
   if (t_ == 0.0) return;
   const double tau = t_ / options_.steps;
   auto impl = std::make_shared<Impl>();
-  const SpMat M = MassMatrix(mesh, MassMatrixTypeFromString(options_.mass_matrix));
+  const SpMat M = MassMatrix(mesh, options_.mass_matrix);
   const SpMat L = CotangentLaplacian(mesh);
   impl->mass = M.diagonal();
   impl->fixed.assign(num_inner_, 0);
   const std::vector<char> boundary =
-      options_.boundary == "fixed" ? BoundaryMask(mesh) : std::vector<char>(num_inner_, 0);
+      options_.boundary == LowpassBoundary::kFixed ? BoundaryMask(mesh) : std::vector<char>(num_inner_, 0);
   for (int i = 0; i < num_inner_; ++i) {
     impl->fixed[i] = boundary[i] || !(impl->mass[i] > 0.0);
   }
   const SpMat A = SpMat(M + tau * L);
   impl->coupling = Coupling(A, impl->fixed);
-  impl->iterative = options_.solver == "iterative";
+  impl->iterative = options_.solver == LowpassSolver::kIterative;
   impl->tolerance = options_.iterative_tolerance;
   if (impl->iterative) {
     impl->system = WithIdentityRows(A, impl->fixed);
@@ -412,8 +382,6 @@ void GeodesicOptions::VisitFields(OptionVisitor& v) {
 void GeodesicOptions::Check() const {
   CheckGt("GeodesicOptions", "time_factor", time_factor, 0.0);
   CheckLt("GeodesicOptions", "time_factor", time_factor, std::numeric_limits<double>::infinity());
-  CheckOneOf("GeodesicOptions", "boundary", boundary, {"neumann", "dirichlet", "averaged"});
-  CheckOneOf("GeodesicOptions", "mass_matrix", mass_matrix, {"barycentric", "voronoi"});
 }
 
 struct GeodesicDistance::Impl {
@@ -468,7 +436,7 @@ GeodesicDistance::GeodesicDistance(const TriMesh& input_mesh, const GeodesicOpti
   }
   impl->component = ConnectedComponents(mesh, &impl->num_components);
 
-  const SpMat M = MassMatrix(mesh, MassMatrixTypeFromString(options.mass_matrix));
+  const SpMat M = MassMatrix(mesh, options.mass_matrix);
   const SpMat L = CotangentLaplacian(mesh);
   const Eigen::VectorXd mass = M.diagonal();
   impl->heat_fixed.assign(nv, 0);
@@ -486,8 +454,8 @@ GeodesicDistance::GeodesicDistance(const TriMesh& input_mesh, const GeodesicOpti
 
   const std::vector<char> boundary = BoundaryMask(mesh);
   const bool open = std::any_of(boundary.begin(), boundary.end(), [](char b) { return b != 0; });
-  impl->use_neumann = !open || options.boundary != "dirichlet";
-  impl->use_dirichlet = open && options.boundary != "neumann";
+  impl->use_neumann = !open || options.boundary != GeodesicBoundary::kDirichlet;
+  impl->use_dirichlet = open && options.boundary != GeodesicBoundary::kNeumann;
 
   const SpMat A = SpMat(M + t_ * L);
   if (impl->use_neumann) {

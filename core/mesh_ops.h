@@ -15,6 +15,7 @@
 // their factorisations behind a pointer.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <string>
 #include <vector>
@@ -55,10 +56,8 @@ enum class MassMatrixType {
                  // non-obtuse triangles, area/2 to the obtuse corner and area/4 to
                  // the others otherwise
 };
-// "barycentric" / "voronoi".
-std::string ToString(MassMatrixType type);
-// Inverse of ToString; throws Error naming the unknown string.
-MassMatrixType MassMatrixTypeFromString(const std::string& name);
+// Names for options and files (ToString / FromString in core/options.h).
+constexpr std::array<const char*, 2> OptionEnumNames(MassMatrixType) { return {"barycentric", "voronoi"}; }
 
 // Lumped mass matrix, #V×#V diagonal, mm². Both types sum to the surface area.
 // Barycentric is the classic choice but is pointwise inconsistent where vertex
@@ -83,6 +82,12 @@ SpMat MassMatrix(const TriMesh& mesh, MassMatrixType type = MassMatrixType::kBar
 inline constexpr double kGaussianBandwidthMm = 3.0;               // G, Sec. 4.1
 inline constexpr double kHighFrequencyGaussianBandwidthMm = 0.3;  // G^HF, Sec. 4.1
 
+// LowpassOptions::boundary and ::solver (see there).
+enum class LowpassBoundary { kNatural, kFixed };
+constexpr std::array<const char*, 2> OptionEnumNames(LowpassBoundary) { return {"natural", "fixed"}; }
+enum class LowpassSolver { kDirect, kIterative };
+constexpr std::array<const char*, 2> OptionEnumNames(LowpassSolver) { return {"direct", "iterative"}; }
+
 struct LowpassOptions {
   // σ, mm: standard deviation of the Gaussian approximated (geodesic). Default:
   // kGaussianBandwidthMm (G); use kHighFrequencyGaussianBandwidthMm for G^HF.
@@ -94,20 +99,20 @@ struct LowpassOptions {
   int steps = 8;
   // Lumped mass in the diffusion: "voronoi" (default, pointwise consistent on
   // regular grids of any valence) or "barycentric".
-  std::string mass_matrix = "voronoi";
+  MassMatrixType mass_matrix = MassMatrixType::kVoronoi;
   // Boundary condition: "natural" (Neumann, zero normal flux: no heat leaves
   // the surface, constants are kept, a linear function bends near the boundary so
   // boundary vertices of a smoothed open mesh slide inwards along the surface, by
   // ~1.1 σ on a flat grid, decaying to < 1e-5 mm at 6 σ from the boundary) or
   // "fixed" (Dirichlet: boundary vertices keep their input values; a planar mesh
   // is then reproduced exactly, but detail at the boundary is not filtered).
-  std::string boundary = "natural";
+  LowpassBoundary boundary = LowpassBoundary::kNatural;
   // How each step's system (M + τL) x = M x_k is solved: "direct" (one sparse
   // LDLᵀ factorisation in the constructor; best for wide filters and repeated use)
   // or "iterative" (conjugate gradients with a Jacobi preconditioner, warm-started
   // from the previous step; no factorisation, best for narrow filters such as G^HF
   // on dense scans, where M + τL is close to diagonal and CG needs a few iterations).
-  std::string solver = "direct";
+  LowpassSolver solver = LowpassSolver::kDirect;
   // "iterative": relative residual at which CG stops (per step and coordinate; 1e-8
   // of positions ~100 mm is ~1e-6 mm).
   double iterative_tolerance = 1e-8;
@@ -176,6 +181,10 @@ class MeshLowpass {
 // ---------------------------------------------------------------------------
 // Geodesic distance.
 
+// GeodesicOptions::boundary (see there).
+enum class GeodesicBoundary { kNeumann, kDirichlet, kAveraged };
+constexpr std::array<const char*, 3> OptionEnumNames(GeodesicBoundary) { return {"neumann", "dirichlet", "averaged"}; }
+
 struct GeodesicOptions {
   // m: heat time t = m·h², h = mean edge length (Crane et al. 2013, Sec. 3.2.4,
   // who recommend m = 1). Larger m gives smoother but less accurate distances.
@@ -184,9 +193,9 @@ struct GeodesicOptions {
   // Sec. 3.2.5): "neumann", "dirichlet" (u = 0 on the boundary except at
   // sources), or "averaged" (mean of the two solutions, their recommendation;
   // one more factorisation). Ignored on closed meshes.
-  std::string boundary = "averaged";
+  GeodesicBoundary boundary = GeodesicBoundary::kAveraged;
   // Lumped mass in the heat step: "voronoi" or "barycentric".
-  std::string mass_matrix = "voronoi";
+  MassMatrixType mass_matrix = MassMatrixType::kVoronoi;
   // Additive constant (step 4 below): true fits it on the sources' one-ring,
   // where the distance is known (edge length); false takes φ at the sources
   // (Crane et al.), which underestimates all distances by ~0.1–0.15 h.

@@ -82,10 +82,13 @@ class SharedDevice {
   RTCDevice device_ = nullptr;
 };
 
-RTCBuildQuality ParseBuildQuality(const std::string& quality) {
-  if (quality == "low") return RTC_BUILD_QUALITY_LOW;
-  if (quality == "high") return RTC_BUILD_QUALITY_HIGH;
-  return RTC_BUILD_QUALITY_MEDIUM;  // "medium"; other values are rejected by Check()
+RTCBuildQuality EmbreeBuildQuality(BvhBuildQuality quality) {
+  switch (quality) {
+    case BvhBuildQuality::kLow: return RTC_BUILD_QUALITY_LOW;
+    case BvhBuildQuality::kMedium: return RTC_BUILD_QUALITY_MEDIUM;
+    case BvhBuildQuality::kHigh: return RTC_BUILD_QUALITY_HIGH;
+  }
+  return RTC_BUILD_QUALITY_MEDIUM;
 }
 
 constexpr int kPacketSize = 16;          // rtcIntersect16 / rtcOccluded16
@@ -118,7 +121,7 @@ void RayCasterOptions::VisitFields(OptionVisitor& v) {
 }
 
 void RayCasterOptions::Check() const {
-  CheckOneOf("RayCasterOptions", "build_quality", build_quality, {"low", "medium", "high"});
+  // Every value of every field is valid (build_quality is an enum).
 }
 
 // ---- RayCaster ----------------------------------------------------------------
@@ -209,27 +212,35 @@ struct RayCaster::Impl {
     return s;
   }
 
+  // The rays rays[begin, end) as a packet of 16: lanes past `end` repeat the first
+  // ray and are marked invalid in `valid`.
+  static void FillPacket(const std::vector<Ray>& rays, size_t begin, size_t end, int* valid, RTCRay16* r) {
+    for (int k = 0; k < kPacketSize; ++k) {
+      const size_t i = begin + static_cast<size_t>(k);
+      const Ray& ray = i < end ? rays[i] : rays[begin];
+      valid[k] = i < end ? -1 : 0;
+      r->org_x[k] = ray.origin.x();
+      r->org_y[k] = ray.origin.y();
+      r->org_z[k] = ray.origin.z();
+      r->tnear[k] = ray.tnear;
+      r->dir_x[k] = ray.direction.x();
+      r->dir_y[k] = ray.direction.y();
+      r->dir_z[k] = ray.direction.z();
+      r->time[k] = 0.0f;
+      r->tfar[k] = ray.tfar;
+      r->mask[k] = 0xFFFFFFFFu;
+      r->id[k] = static_cast<unsigned>(k);
+      r->flags[k] = 0;
+    }
+  }
+
   // Packet of up to 16 rays rays[begin, end).
   void IntersectPacket(const std::vector<Ray>& rays, size_t begin, size_t end,
                        RTCIntersectContext* context, Hit* out) const {
     alignas(64) int valid[kPacketSize];
     RTCRayHit16 rh;
+    FillPacket(rays, begin, end, valid, &rh.ray);
     for (int k = 0; k < kPacketSize; ++k) {
-      const size_t i = begin + static_cast<size_t>(k);
-      const Ray& ray = i < end ? rays[i] : rays[begin];
-      valid[k] = i < end ? -1 : 0;
-      rh.ray.org_x[k] = ray.origin.x();
-      rh.ray.org_y[k] = ray.origin.y();
-      rh.ray.org_z[k] = ray.origin.z();
-      rh.ray.tnear[k] = ray.tnear;
-      rh.ray.dir_x[k] = ray.direction.x();
-      rh.ray.dir_y[k] = ray.direction.y();
-      rh.ray.dir_z[k] = ray.direction.z();
-      rh.ray.time[k] = 0.0f;
-      rh.ray.tfar[k] = ray.tfar;
-      rh.ray.mask[k] = 0xFFFFFFFFu;
-      rh.ray.id[k] = static_cast<unsigned>(k);
-      rh.ray.flags[k] = 0;
       rh.hit.geomID[k] = RTC_INVALID_GEOMETRY_ID;
       rh.hit.instID[0][k] = RTC_INVALID_GEOMETRY_ID;
     }
@@ -251,23 +262,7 @@ struct RayCaster::Impl {
                       RTCIntersectContext* context, uint8_t* out) const {
     alignas(64) int valid[kPacketSize];
     RTCRay16 r;
-    for (int k = 0; k < kPacketSize; ++k) {
-      const size_t i = begin + static_cast<size_t>(k);
-      const Ray& ray = i < end ? rays[i] : rays[begin];
-      valid[k] = i < end ? -1 : 0;
-      r.org_x[k] = ray.origin.x();
-      r.org_y[k] = ray.origin.y();
-      r.org_z[k] = ray.origin.z();
-      r.tnear[k] = ray.tnear;
-      r.dir_x[k] = ray.direction.x();
-      r.dir_y[k] = ray.direction.y();
-      r.dir_z[k] = ray.direction.z();
-      r.time[k] = 0.0f;
-      r.tfar[k] = ray.tfar;
-      r.mask[k] = 0xFFFFFFFFu;
-      r.id[k] = static_cast<unsigned>(k);
-      r.flags[k] = 0;
-    }
+    FillPacket(rays, begin, end, valid, &r);
     rtcOccluded16(valid, scene, context, &r);
     for (size_t i = begin; i < end; ++i) out[i] = r.tfar[i - begin] < 0.0f ? 1 : 0;
   }
@@ -293,7 +288,7 @@ RayCaster::RayCaster(const TriMesh& mesh, const RayCasterOptions& options, const
   // Embree honours a per-geometry quality (here: refit) only in its two-level
   // mode, i.e. with scene build quality low (rtcSetGeometryBuildQuality(3)).
   rtcSetSceneBuildQuality(m.scene, options.dynamic ? RTC_BUILD_QUALITY_LOW
-                                                   : ParseBuildQuality(options.build_quality));
+                                                   : EmbreeBuildQuality(options.build_quality));
   ThrowIfEmbreeError(m.device, "rtcSetSceneBuildQuality");
 
   m.geometry = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_TRIANGLE);

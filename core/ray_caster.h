@@ -15,6 +15,7 @@
 // on the number of threads. One Embree device is shared by the whole process.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -54,6 +55,10 @@ struct SignedHit {
   bool valid() const { return triangle >= 0; }
 };
 
+// RayCasterOptions::build_quality (see there).
+enum class BvhBuildQuality { kLow, kMedium, kHigh };
+constexpr std::array<const char*, 3> OptionEnumNames(BvhBuildQuality) { return {"low", "medium", "high"}; }
+
 struct RayCasterOptions {
   // Embree's robust traversal (RTC_SCENE_FLAG_ROBUST): no misses on shared edges
   // and vertices at some cost in speed. Not a paper parameter.
@@ -61,7 +66,7 @@ struct RayCasterOptions {
   // BVH build quality when dynamic = false: "low" (fast build, two-level),
   // "medium" (Embree's default) or "high" (spatial splits, slowest build).
   // Ignored when dynamic = true, where Embree's refit builder is used.
-  std::string build_quality = "medium";
+  BvhBuildQuality build_quality = BvhBuildQuality::kMedium;
   // For meshes whose vertices move every frame: the scene is built with
   // RTC_SCENE_FLAG_DYNAMIC, scene quality low and geometry quality refit, so that
   // UpdateVertices refits the BVH (keeps its topology) instead of rebuilding it.

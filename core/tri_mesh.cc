@@ -8,6 +8,24 @@
 #include "core/error.h"
 
 namespace crease {
+namespace {
+
+void RequireFaceIndicesOf(const TriMesh& mesh, int f, std::string_view what) {
+  const int nv = mesh.num_vertices();
+  for (int k = 0; k < 3; ++k) {
+    const int v = mesh.F(f, k);
+    if (v < 0 || v >= nv) {
+      throw Error(fmt::format("{}: triangle {} references vertex {}, but the mesh has {} vertices",
+                              what, f, v, nv));
+    }
+  }
+}
+
+}  // namespace
+
+void RequireFaceIndices(const TriMesh& mesh, std::string_view what) {
+  for (int f = 0; f < mesh.num_faces(); ++f) RequireFaceIndicesOf(mesh, f, what);
+}
 
 void ValidateMesh(const TriMesh& mesh, const std::string& what, const MeshRequirements& req) {
   const int nv = mesh.num_vertices();
@@ -24,13 +42,7 @@ void ValidateMesh(const TriMesh& mesh, const std::string& what, const MeshRequir
     }
   }
   for (int f = 0; f < mesh.num_faces(); ++f) {
-    for (int k = 0; k < 3; ++k) {
-      const int v = mesh.F(f, k);
-      if (v < 0 || v >= nv) {
-        throw Error(fmt::format("{}: triangle {} references vertex {}, but the mesh has {} vertices",
-                                what, f, v, nv));
-      }
-    }
+    RequireFaceIndicesOf(mesh, f, what);
     if (mesh.F(f, 0) == mesh.F(f, 1) || mesh.F(f, 1) == mesh.F(f, 2) || mesh.F(f, 0) == mesh.F(f, 2)) {
       throw Error(fmt::format("{}: triangle {} uses one vertex twice ({}, {}, {})", what, f,
                               mesh.F(f, 0), mesh.F(f, 1), mesh.F(f, 2)));

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/types.h"
@@ -27,6 +28,10 @@ struct MeshRequirements {
   bool normals = false;  // per-vertex normals must be present
   bool non_empty = true; // at least one triangle
 };
+
+// Throws Error when a triangle references a vertex outside [0, #V); the message
+// starts with `what` and names the first such triangle and its vertex.
+void RequireFaceIndices(const TriMesh& mesh, std::string_view what);
 
 // Checks that the mesh is well formed: F indices in [0, #V), no degenerate index
 // triples (a triangle using one vertex twice), finite V/UV/N, UV and N sized #V

@@ -68,7 +68,6 @@ void CaptureEvalOptions::Check() const {
   appearance.Check();
   CheckGe(o, "surface_every", surface_every, 0);
   CheckGt(o, "band_mm", band_mm, 0.0);
-  CheckOneOf(o, "detail_truth", detail_truth, {"extraction", "wrinkle-layer"});
   CheckGt(o, "surface_max_distance_mm", surface_max_distance_mm, 0.0);
   CheckGe(o, "surface_mesh_resolution", surface_mesh_resolution, 8);
   CheckGe(o, "offset_search_mm", offset_search_mm, 0.0);
@@ -731,7 +730,7 @@ void CaptureEvalContext::SelectFrames() {
 // The truth of D^t: Sec. 4.1's detail with the model's G (recorded in capture.json
 // by crease ≥ 0.4; the defaults before), or the wrinkle-layer maps.
 void CaptureEvalContext::SetUpDetailTruth() {
-  if (options.detail_truth != "extraction" || !corr.same_uv) return;
+  if (options.detail_truth != DetailTruthKind::kExtraction || !corr.same_uv) return;
   Require(truth_actor.has_value(), fmt::format("{}: missing; detail_truth = extraction needs the actor (or use "
                                                "detail_truth = wrinkle-layer)",
                                                actor_path.string()));
@@ -1257,7 +1256,7 @@ CaptureEvalSummary ReduceSummary(const CaptureEvalContext& c, const FrameLoopSta
   CaptureEvalSummary s;
   s.capture = c.capture.string();
   s.dataset = c.dataset.string();
-  s.detail_truth = c.options.detail_truth;
+  s.detail_truth = ToString(c.options.detail_truth);
   s.per_frame = std::move(per_frame);
   s.frames = static_cast<int>(s.per_frame.size());
   s.error_vectors = st.error_vectors;

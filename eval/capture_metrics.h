@@ -30,6 +30,7 @@
 // Results: eval.json (summary and per-frame), eval_frames.csv, eval.md.
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -46,6 +47,10 @@ namespace crease {
 
 class OptionVisitor;
 
+// CaptureEvalOptions::detail_truth (see there).
+enum class DetailTruthKind { kExtraction, kWrinkleLayer };
+constexpr std::array<const char*, 2> OptionEnumNames(DetailTruthKind) { return {"extraction", "wrinkle-layer"}; }
+
 struct CaptureEvalOptions {
   // Surface metrics of H^t on every this-many-th tracked frame (rebuilding the
   // true high-resolution surface costs ~0.35 s per frame, as much as all the other
@@ -59,7 +64,7 @@ struct CaptureEvalOptions {
   // regresses; needs the dataset's actor.json); "wrinkle-layer" = the dataset's
   // expression displacement maps (the studio's wrinkle lines alone, the definition
   // of crease ≤ 0.3). The wrinkle layer alone is reported beside either.
-  std::string detail_truth = "extraction";
+  DetailTruthKind detail_truth = DetailTruthKind::kExtraction;
   // When set, the truth D^t is scored against is written here per frame
   // (NNNNNN.exr, mm, CV_32F, the capture's map resolution), to look at beside D^t.
   std::string truth_maps_dir;

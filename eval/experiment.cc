@@ -84,7 +84,6 @@ void ExperimentDataset::Check() const {
   CheckGe("dataset", "test_seed", static_cast<double>(test_seed), 0);
   CheckOneOf("dataset", "preset", preset, SequencePresetNames());
   CheckGe("dataset", "seconds", seconds, 0.0);
-  CheckOneOf("dataset", "landmarks", landmarks, {"regressor", "dlib", "ground-truth-prior", "ground-truth-fit"});
   CheckGe("dataset", "landmark_noise_px", landmark_noise_px, 0.0);
   CheckGe("dataset", "mesh_every", mesh_every, 0);
   if (!scan_size.empty()) {
@@ -95,8 +94,7 @@ void ExperimentDataset::Check() const {
             fmt::format("dataset.scan_size = '{}': expected WIDTHxHEIGHT, e.g. 1280x720", scan_size));
   }
   Require(!loao_regressors.empty(), "dataset.loao_regressors must name at least one regressor");
-  for (const auto& r : loao_regressors) CheckOneOf("dataset", "loao_regressors", r, {"ferns", "ridge", "nearest"});
-  CheckOneOf("dataset", "patch_sites", patch_sites, {"own", "truth"});
+  for (const auto& r : loao_regressors) CheckOneOf("dataset", "loao_regressors", r, EnumNames<PatchRegressor>());
 }
 
 namespace {
@@ -626,7 +624,7 @@ std::pair<std::string, fs::path> PlanTrackerStage(RunPlan& p, const ExperimentSt
   const ExperimentConfig& c = p.c;
   const ExperimentDataset& d = p.d;
   const fs::path rig_file = RigFile(rig);
-  if (d.landmarks != "regressor") return {};
+  if (d.landmarks != ExperimentLandmarks::kRegressor) return {};
   const ExperimentStage tracker = p.Add("tracker", {{"tracker", KeySectionOf(c, "tracker")}, {"seed", d.tracker_seed}},
                                         {rig.key}, [&](const fs::path& dir) {
                                           std::vector<std::string> a = {"train-tracker", "--rig", rig_file.string(),
@@ -695,27 +693,27 @@ void PlanCaptureStages(RunPlan& p, const ExperimentStage& model, const Experimen
   std::vector<std::string> capture_depends = {model.key, sequence.key};
   if (!tracker.first.empty()) capture_depends.push_back(tracker.first);
   fs::path truth_maps;  // rung R1: the wrinkle map from the true detail of the wrinkle frames
-  if (d.patch_sites == "truth") {
+  if (d.patch_sites == PatchSites::kTruth) {
     const auto [maps_key, maps_dir] = PlanTruthMapsStage(p, model, sequence);
     capture_depends.push_back(maps_key);
     truth_maps = maps_dir;
   }
   json capture_inputs = {{"capture", KeySectionOf(c, "capture")},
-                         {"landmarks", d.landmarks},
+                         {"landmarks", ToString(d.landmarks)},
                          {"noise", d.landmark_noise_px},
                          {"mesh_every", d.mesh_every}};
   if (d.exclusive_capture) capture_inputs["exclusive"] = true;  // its timings were taken alone
-  if (d.patch_sites != "own") capture_inputs["patch_sites"] = d.patch_sites;
+  if (d.patch_sites != PatchSites::kOwn) capture_inputs["patch_sites"] = ToString(d.patch_sites);
   p.Add(
       "capture", capture_inputs,
       capture_depends, [&](const fs::path& dir) {
         std::vector<std::string> a = {"capture", "-i", (sequence.dir / "dataset").string(), "--model",
                                       (model.dir / "model.cdm").string()};
-        if (d.landmarks == "regressor") {
+        if (d.landmarks == ExperimentLandmarks::kRegressor) {
           a.insert(a.end(), {"--tracker", tracker.second.string()});
-        } else if (d.landmarks == "dlib") {
+        } else if (d.landmarks == ExperimentLandmarks::kDlib) {
           a.insert(a.end(), {"--landmarks", "dlib"});
-        } else if (d.landmarks == "ground-truth-fit") {
+        } else if (d.landmarks == ExperimentLandmarks::kGroundTruthFit) {
           a.push_back("--ground-truth-fit");
         } else {
           a.insert(a.end(), {"--ground-truth-prior", "--noise", fmt::format("{}", d.landmark_noise_px)});

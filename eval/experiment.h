@@ -38,6 +38,7 @@
 //   table, figures, claims: passed to the report (reports/make_report.py) as they are.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -50,6 +51,15 @@
 #include "core/options.h"
 
 namespace crease {
+
+// ExperimentDataset::landmarks: the capture's landmark source (a `crease capture` flag).
+enum class ExperimentLandmarks { kRegressor, kDlib, kGroundTruthPrior, kGroundTruthFit };
+constexpr std::array<const char*, 4> OptionEnumNames(ExperimentLandmarks) {
+  return {"regressor", "dlib", "ground-truth-prior", "ground-truth-fit"};
+}
+// ExperimentDataset::patch_sites (see there).
+enum class PatchSites { kOwn, kTruth };
+constexpr std::array<const char*, 2> OptionEnumNames(PatchSites) { return {"own", "truth"}; }
 
 // The studio data and the method's inputs of one run (section `dataset`).
 struct ExperimentDataset {
@@ -67,7 +77,7 @@ struct ExperimentDataset {
   double seconds = 0.0;              // preset length (0: the preset's own)
   int frames = -1;                   // render at most this many frames (−1: all)
   std::string light;                 // light rig of the sequence when it keys none ("" = studio)
-  std::string landmarks = "regressor";  // regressor | dlib | ground-truth-prior | ground-truth-fit
+  ExperimentLandmarks landmarks = ExperimentLandmarks::kRegressor;  // regressor | dlib | ground-truth-prior | ground-truth-fit
   double landmark_noise_px = 0.0;    // ground-truth-prior noise, px
   int64_t tracker_seed = 1;          // seed of the landmark regressor's training (fixed across seeds)
   // Capture meshes written every N frames; 0 = none (eval rebuilds H^t itself, and
@@ -83,7 +93,7 @@ struct ExperimentDataset {
   // Where capture places its patches: "own" (the paper: its wrinkle map of the first
   // frames) or "truth" (rung R1: from the true detail D* of those frames, a
   // `truth-maps` stage; studio sequences only).
-  std::string patch_sites = "own";
+  PatchSites patch_sites = PatchSites::kOwn;
   void VisitFields(OptionVisitor& v);
   void Check() const;
 };

@@ -94,7 +94,8 @@ LeaveOneActorOutResult EvaluateLeaveOneActorOut(const TrainingPairs& pairs, cons
   Require(pairs.actor_names.size() >= 2,
           fmt::format("{}: {} actor(s); leaving one out needs two or more", what, pairs.actor_names.size()));
   Require(!regressors.empty(), fmt::format("{}: no regressor to evaluate", what));
-  for (const auto& r : regressors) CheckOneOf("leave-one-actor-out", "regressor", r, {"ferns", "ridge", "nearest"});
+  std::vector<PatchRegressor> kinds;
+  for (const auto& r : regressors) kinds.push_back(FromString<PatchRegressor>(r, "leave-one-actor-out.regressor"));
   LeaveOneActorOutResult result;
   result.regressors = regressors;
   for (int32_t a = 0; a < static_cast<int32_t>(pairs.actor_names.size()); ++a) {
@@ -103,7 +104,7 @@ LeaveOneActorOutResult EvaluateLeaveOneActorOut(const TrainingPairs& pairs, cons
     if (test_rows.empty() || train_rows.size() < 2) continue;  // an actor without pairs holds nothing out
     const TrainingPairs train = pairs.Rows(train_rows), test = pairs.Rows(test_rows);
     TrainingOptions o = options;
-    o.baseline.regressor = "ferns";
+    o.baseline.regressor = PatchRegressor::kFerns;
     DetailModel model = TrainDetailModelFromPairs(train, o, {}, nullptr);
     LeaveOneActorOutFold fold;
     fold.actor = pairs.actor_names[a];
@@ -115,9 +116,9 @@ LeaveOneActorOutResult EvaluateLeaveOneActorOut(const TrainingPairs& pairs, cons
     const Eigen::MatrixXf targets = model.pca.ProjectPatches(train.displacement);
     for (size_t r = 0; r < regressors.size(); ++r) {
       model.baseline = PatchBaseline();
-      if (regressors[r] != "ferns") {
+      if (kinds[r] != PatchRegressor::kFerns) {
         PatchBaselineOptions b = options.baseline;
-        b.regressor = regressors[r];
+        b.regressor = kinds[r];
         model.baseline = FitPatchBaseline(features, targets, b);
       }
       fold.held_out.push_back(EvaluatePairs(model, test, fold_what));

@@ -171,7 +171,7 @@ void RendererOptions::VisitFields(OptionVisitor& v) {
 }
 
 void RendererOptions::Check() const {
-  CheckOneOf("RendererOptions", "build_quality", build_quality, {"low", "medium", "high"});
+  // Every value of every field is valid (build_quality is an enum).
 }
 
 // ---- Renderer -------------------------------------------------------------------------

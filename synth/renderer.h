@@ -35,6 +35,7 @@
 
 #include "core/camera.h"
 #include "core/options.h"
+#include "core/ray_caster.h"
 #include "core/rng.h"
 #include "core/tri_mesh.h"
 #include "synth/brdf.h"
@@ -100,7 +101,7 @@ struct RendererOptions {
   // Refittable BVH (RayCasterOptions::dynamic): UpdateGeometry refits instead of
   // rebuilding — fast per-frame updates, slightly slower rays.
   bool dynamic = true;
-  std::string build_quality = "medium";  // when !dynamic: "low", "medium" or "high"
+  BvhBuildQuality build_quality = BvhBuildQuality::kMedium;  // when !dynamic: "low", "medium" or "high"
   bool robust = false;                   // Embree robust traversal (no misses on shared edges)
 
   void VisitFields(OptionVisitor& v);

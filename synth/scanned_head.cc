@@ -33,12 +33,10 @@ void ScannedHeadOptions::VisitFields(OptionVisitor& v) {
 void ScannedHeadOptions::Check() const {
   const char* o = "ScannedHeadOptions";
   CheckGe(o, "units_to_mm", units_to_mm, 0.0);
-  CheckOneOf(o, "v_up", v_up, {"auto", "yes", "no"});
   CheckGe(o, "grid_resolution", grid_resolution, 16);
   CheckLe(o, "grid_resolution", grid_resolution, 8192);
   CheckGe(o, "phong_alpha", phong_alpha, 0.0);
   CheckLe(o, "phong_alpha", phong_alpha, 1.0);
-  CheckOneOf(o, "normal_map_space", normal_map_space, {"tangent", "object"});
 }
 
 namespace {
@@ -228,7 +226,7 @@ MatX3d NormalsFromNormalMap(const TriMesh& mesh, const cv::Mat& normal_map, cons
   const int nv = mesh.num_vertices();
   // Per-vertex ∂p/∂u and ∂p/∂v (v downwards), area-weighted over the adjacent faces.
   MatX3d Tu = MatX3d::Zero(nv, 3), Tv = MatX3d::Zero(nv, 3);
-  if (options.normal_map_space == "tangent") {
+  if (options.normal_map_space == NormalMapSpace::kTangent) {
     for (int f = 0; f < mesh.num_faces(); ++f) {
       const int a = mesh.F(f, 0), b = mesh.F(f, 1), c = mesh.F(f, 2);
       const Eigen::Vector3d e1 = (mesh.V.row(b) - mesh.V.row(a)).transpose(), e2 = (mesh.V.row(c) - mesh.V.row(a)).transpose();
@@ -252,7 +250,7 @@ MatX3d NormalsFromNormalMap(const TriMesh& mesh, const cv::Mat& normal_map, cons
     const Eigen::Vector3d m = 2.0 * SampleMetric(normal_map, mesh.UV(i, 0), mesh.UV(i, 1)) - Eigen::Vector3d::Ones();
     const Eigen::Vector3d n = N.row(i).transpose();
     Eigen::Vector3d s;
-    if (options.normal_map_space == "object") {
+    if (options.normal_map_space == NormalMapSpace::kObject) {
       s = m;
     } else {
       Eigen::Vector3d t = Tu.row(i).transpose();
@@ -296,7 +294,7 @@ ScannedHead LoadScannedHead(const std::filesystem::path& mesh_path, const std::f
   TriMesh scan = gltf ? ReadGltfMesh(mesh_path, &embedded_albedo, units_to_mm) : ReadMesh(mesh_path);
   ValidateMesh(scan, mesh_path.string(), {.uv = true});
   if (!gltf) scan.V *= units_to_mm;
-  const bool v_up = options.v_up == "yes" || (options.v_up == "auto" && !gltf);
+  const bool v_up = options.v_up == TextureVUp::kYes || (options.v_up == TextureVUp::kAuto && !gltf);
   if (v_up) scan.UV.col(1) = (1.0 - scan.UV.col(1).array()).matrix();
   scan.N = VertexNormals(scan);
 

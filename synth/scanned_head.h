@@ -34,6 +34,7 @@
 // relit, posed and rendered, not animated.
 #pragma once
 
+#include <array>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -44,14 +45,20 @@
 
 namespace crease {
 
+// ScannedHeadOptions::v_up and ::normal_map_space (see there).
+enum class TextureVUp { kAuto, kYes, kNo };
+constexpr std::array<const char*, 3> OptionEnumNames(TextureVUp) { return {"auto", "yes", "no"}; }
+enum class NormalMapSpace { kTangent, kObject };
+constexpr std::array<const char*, 2> OptionEnumNames(NormalMapSpace) { return {"tangent", "object"}; }
+
 struct ScannedHeadOptions {
   double units_to_mm = 0.0;            // scale of the mesh file's coordinates; 0 = the format's (glTF m, else mm)
-  std::string v_up = "auto";           // the file's texture v grows upwards: yes | no | auto (OBJ/PLY yes, glTF no)
+  TextureVUp v_up = TextureVUp::kAuto;  // the file's texture v grows upwards: yes | no | auto (OBJ/PLY yes, glTF no)
   double displacement_scale_mm = 1.0;  // mm per unit of the displacement map's values
   double displacement_midlevel = 0.0;  // map value meaning "no displacement" (0.5 for 8-bit maps)
   int grid_resolution = 1024;          // resampling grid for displacement, texels per side
   double phong_alpha = 0.75;           // rounding of the scan's facets under the displacement
-  std::string normal_map_space = "tangent";  // tangent | object
+  NormalMapSpace normal_map_space = NormalMapSpace::kTangent;  // tangent | object
   bool normal_map_green_down = false;        // tangent space, DirectX convention (green = −v of the file)
 
   void VisitFields(OptionVisitor& v);

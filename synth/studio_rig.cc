@@ -10,14 +10,13 @@ void StudioRigOptions::VisitFields(OptionVisitor& v) {
 }
 
 void StudioRigOptions::Check() const {
-  CheckOneOf("StudioRigOptions", "head", head, {"ict", "procedural"});
   ict.Check();
   procedural.Check();
 }
 
 FaceRig BuildStudioRig(const StudioRigOptions& options) {
   options.Check();
-  if (options.head == "procedural") return BuildProceduralRig(options.procedural);
+  if (options.head == StudioHead::kProcedural) return BuildProceduralRig(options.procedural);
   return BuildIctStudioRig(
       ReadRig(options.ict_rig.empty() ? VendoredIctRigPath() : std::filesystem::path(options.ict_rig)), options.ict);
 }

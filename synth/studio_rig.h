@@ -3,6 +3,7 @@
 // for `crease synth rig` and the experiment runner's rig stage.
 #pragma once
 
+#include <array>
 #include <string>
 
 #include "core/face_rig.h"
@@ -12,8 +13,12 @@
 
 namespace crease {
 
+// StudioRigOptions::head (see there).
+enum class StudioHead { kIct, kProcedural };
+constexpr std::array<const char*, 2> OptionEnumNames(StudioHead) { return {"ict", "procedural"}; }
+
 struct StudioRigOptions {
-  std::string head = "ict";  // "ict" (ICT-FaceKit, realistic) or "procedural"
+  StudioHead head = StudioHead::kIct;  // "ict" (ICT-FaceKit, realistic) or "procedural"
   std::string ict_rig;       // the imported ICT rig; "" = the vendored data/ict/ict_face_light.crig
   IctHeadOptions ict;               // head = ict (fields: identity_modes, eyelashes, iris_radius_mm, …)
   ProceduralRigOptions procedural;  // head = procedural (fields: face_columns, hair_thickness_mm, …)

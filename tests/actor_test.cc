@@ -20,26 +20,19 @@
 #include "core/rig_import.h"
 #include "core/uv_raster.h"
 #include "synth/procedural_rig.h"
+#include "tests/synth_test_util.h"
 #include "tests/test_util.h"
 
 namespace crease {
 namespace {
+
+using testing::ExpressionWeights;
 
 namespace fs = std::filesystem;
 using testing::TestDir;
 using testing::WriteText;
 
 using testing::SampleRig;
-
-Eigen::VectorXd Weights(const FaceRig& rig, const std::vector<std::pair<std::string, double>>& w) {
-  Eigen::VectorXd e = Eigen::VectorXd::Zero(rig.num_expressions());
-  for (const auto& [name, value] : w) {
-    const int k = rig.ExpressionIndex(name);
-    EXPECT_GE(k, 0) << name;
-    if (k >= 0) e[k] = value;
-  }
-  return e;
-}
 
 bool SameBytes(const cv::Mat& a, const cv::Mat& b) {
   if (a.size != b.size || a.type() != b.type() || !a.isContinuous() || !b.isContinuous()) return false;
@@ -72,7 +65,7 @@ TEST(Actor, SameSeedGivesIdenticalBytes) {
   const Actor b = GenerateActor(rig, 7, opt);
   EXPECT_EQ(ActorToJson(a), ActorToJson(b));
   const ActorModel ma(rig, a), mb(rig, b);
-  const Eigen::VectorXd e = Weights(rig, {{"browInnerUp", 1.0}, {"mouthSmile_L", 0.7}});
+  const Eigen::VectorXd e = ExpressionWeights(rig, {{"browInnerUp", 1.0}, {"mouthSmile_L", 0.7}});
   const ActorFrame fa = ma.Frame(e), fb = mb.Frame(e);
   EXPECT_TRUE(SameBytes(fa.expression_displacement, fb.expression_displacement));
   EXPECT_TRUE(SameBytes(fa.static_displacement, fb.static_displacement));
@@ -155,7 +148,7 @@ TEST(Actor, WrinkleDepthGrowsWithCompressionAndVanishesAtNeutral) {
   const int mi = static_cast<int>(mid.x() * R), mj = static_cast<int>(mid.y() * R);
   double prev_c = 0.0;
   for (double w : {0.25, 0.5, 0.75, 1.0}) {
-    const Eigen::VectorXd e = Weights(rig, {{"browInnerUp", w}});
+    const Eigen::VectorXd e = ExpressionWeights(rig, {{"browInnerUp", w}});
     const MatX3d V = rig.EvaluatePositions(model.actor().identity, e);
     const cv::Mat metric = model.strain().MetricMap(V);
     const cv::Mat D = model.wrinkles().Displacement(metric);
@@ -167,7 +160,7 @@ TEST(Actor, WrinkleDepthGrowsWithCompressionAndVanishesAtNeutral) {
     prev_c = c;
   }
   // Full brow raise: clearly visible furrows (≥ 0.1 mm deep).
-  const ActorFrame raised = model.Frame(Weights(rig, {{"browInnerUp", 1.0}}), false);
+  const ActorFrame raised = model.Frame(ExpressionWeights(rig, {{"browInnerUp", 1.0}}), false);
   double min_forehead = 0;
   for (const auto& s : model.wrinkles().samples()) {
     if (model.wrinkles().lines()[s.line].family == WrinkleFamily::kForehead)
@@ -223,7 +216,7 @@ int CheckHiResAgainstMaps(const ActorModel& model, const ActorFrame& f) {
 
 TEST(Actor, HiResSurfaceMinusCoarseEqualsDisplacementMaps) {
   const FaceRig& rig = SampleRig();
-  const Eigen::VectorXd e = Weights(rig, {{"browInnerUp", 0.8}, {"mouthSmile_R", 1.0}, {"jawOpen", 0.3}});
+  const Eigen::VectorXd e = ExpressionWeights(rig, {{"browInnerUp", 0.8}, {"mouthSmile_R", 1.0}, {"jawOpen", 0.3}});
   // Grid = map texels (the sample rig's chart fills the unit square: 512² ≥ 250k vertices).
   ActorOptions opt = TestOptions(512);
   opt.surface_min_vertices = 250000;
@@ -278,7 +271,7 @@ TEST(Actor, WorksWithoutLandmarksFromRegionMasks) {
   EXPECT_GT(forehead, 0);
   EXPECT_EQ(inside, forehead);
   const ActorModel model(rig, actor);
-  const ActorFrame f = model.Frame(Weights(rig, {{"browInnerUp", 1.0}}), false);
+  const ActorFrame f = model.Frame(ExpressionWeights(rig, {{"browInnerUp", 1.0}}), false);
   EXPECT_LT(SumAbsOverFamily(model, model.Frame(Eigen::VectorXd(), false).expression_displacement,
                              WrinkleFamily::kForehead), 1e-6);
   EXPECT_GT(SumAbsOverFamily(model, f.expression_displacement, WrinkleFamily::kForehead), 1.0);
@@ -374,7 +367,7 @@ TEST(Actor, PersonalExpressionsDeviateFromTheRigWhereItMoves) {
   EXPECT_GT((P - w * B).norm(), 0.03 * P.norm());
   // The actor's model moves with it; amount 0 gives the rig back exactly.
   const ActorModel model(rig, a);
-  const Eigen::VectorXd e = Weights(rig, {{"jawOpen", 1.0}});
+  const Eigen::VectorXd e = ExpressionWeights(rig, {{"jawOpen", 1.0}});
   EXPECT_EQ(model.Frame(e, false).coarse.V, personal.EvaluatePositions(a.identity, e));
   Actor none = a;
   none.expression_deviation.amount = 0.0;
@@ -404,7 +397,7 @@ TEST(Actor, JsonRoundTripRebuildsIdentically) {
     EXPECT_EQ(a.wrinkles[k].max_depth_mm, b.wrinkles[k].max_depth_mm);
   }
   const ActorModel ma(rig, a), mb(rig, b);
-  const Eigen::VectorXd e = Weights(rig, {{"browDown", 1.0}});
+  const Eigen::VectorXd e = ExpressionWeights(rig, {{"browDown", 1.0}});
   const ActorFrame fa = ma.Frame(e), fb = mb.Frame(e);
   EXPECT_TRUE(SameBytes(fa.expression_displacement, fb.expression_displacement));
   EXPECT_TRUE(SameBytes(fa.static_displacement, fb.static_displacement));
@@ -478,7 +471,7 @@ void WritePreviews(const FaceRig& rig, const std::string& prefix,
   ro.elevation_deg = 0;
   ro.width = ro.height = 1600;
   for (const auto& [name, weights] : poses) {
-    const ActorFrame f = model.Frame(Weights(rig, weights));
+    const ActorFrame f = model.Frame(ExpressionWeights(rig, weights));
     std::printf("%s%s: %d hi-res vertices (grid %d², maps %d²), %d faces, %.3f s\n", prefix.c_str(), name.c_str(),
                 f.hires.num_vertices(), model.layout().resolution, model.layout().map_resolution,
                 f.hires.num_faces(), f.seconds);

@@ -17,6 +17,8 @@
 namespace crease {
 namespace {
 
+using testing::ExpressionWeights;
+
 constexpr double kDeg = std::numbers::pi / 180.0;
 
 const FaceRig& Rig() { return testing::ProceduralRig(); }
@@ -29,12 +31,6 @@ Eigen::VectorXd TrueIdentity(const FaceRig& rig) {
   a[2] = -0.8;
   a[8] = 0.7;
   return a;
-}
-
-Eigen::VectorXd Weights(const FaceRig& rig, std::initializer_list<std::pair<const char*, double>> w) {
-  Eigen::VectorXd e = Eigen::VectorXd::Zero(rig.num_expressions());
-  for (const auto& [name, value] : w) e[rig.ExpressionIndex(name)] = value;
-  return e;
 }
 
 // A head ~550 mm in front of the camera (face ~230 px wide), facing it, turned by
@@ -65,8 +61,8 @@ double RotationErrorDeg(const Rigid3d& a, const Rigid3d& b) { return a.rotation.
 void RunIdentityPhase(LandmarkRigFitter* fitter, const Eigen::VectorXd& identity) {
   const FaceRig& rig = Rig();
   const std::vector<Eigen::VectorXd> expressions = {
-      Eigen::VectorXd::Zero(rig.num_expressions()), Weights(rig, {{"jawOpen", 0.5}}),
-      Weights(rig, {{"mouthSmile_L", 0.7}, {"mouthSmile_R", 0.7}}), Weights(rig, {{"browInnerUp_L", 0.6}}),
+      Eigen::VectorXd::Zero(rig.num_expressions()), ExpressionWeights(rig, {{"jawOpen", 0.5}}),
+      ExpressionWeights(rig, {{"mouthSmile_L", 0.7}, {"mouthSmile_R", 0.7}}), ExpressionWeights(rig, {{"browInnerUp_L", 0.6}}),
       Eigen::VectorXd::Zero(rig.num_expressions())};
   const double yaw[] = {0, 15, -15, 5, -5}, pitch[] = {0, 5, -5, 10, 0};
   for (int j = 0; j < 5; ++j) fitter->Fit(Landmarks(rig, identity, expressions[j], Pose(yaw[j], pitch[j])));
@@ -84,7 +80,7 @@ TEST(LandmarkFit, RecoversExpressionsAndPoseAfterTheIdentityPhase) {
   ASSERT_TRUE(fitter.identity_fixed());
 
   const Eigen::VectorXd beta =
-      Weights(rig, {{"browInnerUp_L", 0.8}, {"browInnerUp_R", 0.8}, {"jawOpen", 0.4}, {"mouthSmile_L", 0.6}});
+      ExpressionWeights(rig, {{"browInnerUp_L", 0.8}, {"browInnerUp_R", 0.8}, {"jawOpen", 0.4}, {"mouthSmile_L", 0.6}});
   const Rigid3d pose = Pose(12.0, -6.0, Eigen::Vector3d(-8.0, 4.0, 20.0));
   // A few tracked frames of the target (the temporal prior needs a few frames to
   // catch up with this sudden jump of 17° and 22 mm).
@@ -115,7 +111,7 @@ double Jitter(const LandmarkFitOptions& o, double* rotation_jitter_deg) {
   const Eigen::VectorXd identity = TrueIdentity(rig);
   LandmarkRigFitter fitter(rig, Intrinsics(), o);
   fitter.SetIdentity(identity);
-  const Eigen::VectorXd beta = Weights(rig, {{"jawOpen", 0.3}, {"mouthSmile_L", 0.4}, {"browInnerUp_R", 0.5}});
+  const Eigen::VectorXd beta = ExpressionWeights(rig, {{"jawOpen", 0.3}, {"mouthSmile_L", 0.4}, {"browInnerUp_R", 0.5}});
   const MatX2d clean = Landmarks(rig, identity, beta, Pose(5.0, 3.0));
   Rng rng(11);
   LandmarkFrameFit prev;
@@ -160,7 +156,7 @@ MatX2d SlideContour(const MatX2d& l, double fraction) {
 TEST(LandmarkFit, JawContourPointsSlideAlongTheOutline) {
   const FaceRig& rig = Rig();
   const Eigen::VectorXd identity = TrueIdentity(rig);
-  const Eigen::VectorXd beta = Weights(rig, {{"jawOpen", 0.3}, {"mouthSmile_R", 0.5}});
+  const Eigen::VectorXd beta = ExpressionWeights(rig, {{"jawOpen", 0.3}, {"mouthSmile_R", 0.5}});
   const Rigid3d pose = Pose(-10.0, 4.0);
   const MatX2d clean = Landmarks(rig, identity, beta, pose);
   const MatX2d slid = SlideContour(clean, 0.4);
@@ -202,7 +198,7 @@ TEST(LandmarkFit, ResetReinitialisesThePoseAndKeepsTheIdentity) {
   LandmarkRigFitter fitter(rig, Intrinsics(), o);
   fitter.SetIdentity(identity);
   const Eigen::VectorXd beta0 = Eigen::VectorXd::Zero(rig.num_expressions());
-  const Eigen::VectorXd beta1 = Weights(rig, {{"jawOpen", 0.6}});
+  const Eigen::VectorXd beta1 = ExpressionWeights(rig, {{"jawOpen", 0.6}});
   const Rigid3d pose0 = Pose(0.0, 0.0), pose1 = Pose(25.0, -8.0, Eigen::Vector3d(30.0, -20.0, 40.0));
   const LandmarkFrameFit first = fitter.Fit(Landmarks(rig, identity, beta0, pose0));
   EXPECT_LT(RotationErrorDeg(first.cam_from_head, pose0), 1.0);
@@ -265,7 +261,7 @@ TEST(LandmarkFit, BadInput) {
 TEST(LandmarkFit, GroundTruthPriorIsTheRigsBestExplanation) {
   const FaceRig& rig = Rig();
   const Eigen::VectorXd identity = TrueIdentity(rig);
-  const Eigen::VectorXd beta = Weights(rig, {{"jawOpen", 0.5}, {"browInnerUp_L", 0.7}});
+  const Eigen::VectorXd beta = ExpressionWeights(rig, {{"jawOpen", 0.5}, {"browInnerUp_L", 0.7}});
   const Rigid3d pose = Pose(8.0, 2.0);
   // Ground truth: the projections of all rig vertices (NaN-free here).
   const MatX3d X = rig.EvaluatePositions(identity, beta);

@@ -176,8 +176,9 @@ TEST(MassMatrix, SumsToSurfaceArea) {
   EXPECT_NEAR(vor[7], 4.0, 1e-12);
   EXPECT_NEAR(std::max(bar[6], bar[7]), 16.0 / 3.0, 1e-12);
   EXPECT_NEAR(std::min(bar[6], bar[7]), 8.0 / 3.0, 1e-12);
-  EXPECT_EQ(MassMatrixTypeFromString(ToString(MassMatrixType::kVoronoi)), MassMatrixType::kVoronoi);
-  EXPECT_THROW(MassMatrixTypeFromString("lumped"), Error);
+  EXPECT_EQ(FromString<MassMatrixType>(ToString(MassMatrixType::kVoronoi), "mass_matrix"), MassMatrixType::kVoronoi);
+  EXPECT_ERROR_HAS(FromString<MassMatrixType>("lumped", "mass_matrix"),
+                   "mass_matrix = 'lumped' must be one of: barycentric, voronoi");
 }
 
 // ---------------------------------------------------------------------------
@@ -186,7 +187,7 @@ TEST(MassMatrix, SumsToSurfaceArea) {
 TEST(MeshLowpass, FixedBoundaryKeepsPlanesExactly) {
   const TriMesh grid = JitteredGrid(30, 30.0, 0.2, 9);
   LowpassOptions opt;
-  opt.boundary = "fixed";
+  opt.boundary = LowpassBoundary::kFixed;
   for (const bool tilted : {false, true}) {
     const TriMesh m = tilted ? Moved(grid, SomeRotation(), {10, -5, 3}) : grid;
     const MatX3d out = MeshLowpass(m, opt).Apply(m.V);
@@ -270,7 +271,7 @@ TEST(MeshLowpass, AttenuatesASineByTheDesignedFactor) {
 
   // Barycentric mass on this alternating-valence grid: a checkerboard error.
   LowpassOptions bary;
-  bary.mass_matrix = "barycentric";
+  bary.mass_matrix = MassMatrixType::kBarycentric;
   const MatX3d out_bary = MeshLowpass(flat, bary).Apply(bumpy.V);
   double worst_bary = 0.0;
   for (int i = 0; i < out_bary.rows(); ++i) {
@@ -307,7 +308,7 @@ TEST(MeshLowpass, IterativeSolverMatchesTheDirectOne) {
     LowpassOptions direct;
     direct.bandwidth_mm = sigma;
     LowpassOptions iterative = direct;
-    iterative.solver = "iterative";
+    iterative.solver = LowpassSolver::kIterative;
     const MatX3d a = MeshLowpass(sphere, direct).Apply(sphere.V);
     // The default tolerance (1e-8 relative residual) is within 0.1 µm here; a
     // tight one reproduces the direct solve.
@@ -316,8 +317,8 @@ TEST(MeshLowpass, IterativeSolverMatchesTheDirectOne) {
     EXPECT_LT((a - MeshLowpass(sphere, iterative).Apply(sphere.V)).cwiseAbs().maxCoeff(), 1e-7) << "sigma " << sigma;
   }
   LowpassOptions bad;
-  bad.solver = "multigrid";
-  EXPECT_ERROR_HAS(bad.Check(), "solver");
+  EXPECT_ERROR_HAS(SetOptionsFromJson(R"({"solver": "multigrid"})", "test", &bad),
+                   "test: option 'solver' must be one of: direct, iterative, got \"multigrid\"");
 }
 
 TEST(MeshLowpass, OptionsAndErrors) {
@@ -334,8 +335,8 @@ TEST(MeshLowpass, OptionsAndErrors) {
     EXPECT_NE(std::string(e.what()).find("LowpassOptions.steps"), std::string::npos) << e.what();
   }
   bad = {};
-  bad.boundary = "open";
-  EXPECT_THROW(MeshLowpass(m, bad), Error);
+  EXPECT_ERROR_HAS(SetOptionsFromJson(R"({"boundary": "open"})", "test", &bad),
+                   "test: option 'boundary' must be one of: natural, fixed, got \"open\"");
   const MeshLowpass lp(m);
   const Eigen::VectorXd too_short = Eigen::VectorXd::Zero(3);
   EXPECT_THROW(lp.Apply(too_short), Error);
@@ -382,7 +383,7 @@ TEST(GeodesicDistance, FlatGridMatchesEuclidean) {
   for (int i = 0; i < m.num_vertices(); ++i) euclid[i] = (m.V.row(i) - m.V.row(centre)).norm();
   for (const std::string boundary : {"averaged", "neumann", "dirichlet"}) {
     GeodesicOptions opt;
-    opt.boundary = boundary;
+    opt.boundary = FromString<GeodesicBoundary>(boundary, "boundary");
     const GeodesicDistance geo(m, opt);
     const Eigen::VectorXd d = geo.From({centre});
     EXPECT_EQ(d[centre], 0.0);

@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "pipeline/training/detail_model.h"
+#include "tests/test_util.h"
 
 namespace crease {
 namespace {
@@ -34,7 +35,7 @@ TEST(PatchBaselines, RidgeRecoversALinearMap) {
   Eigen::MatrixXf T, C, W;
   LinearData(400, 16, 3, &T, &C, &W);
   PatchBaselineOptions o;
-  o.regressor = "ridge";
+  o.regressor = PatchRegressor::kRidge;
   o.ridge_lambda = 1e-6;
   const PatchBaseline b = FitPatchBaseline(T, C, o);
   b.Check("ridge");
@@ -53,7 +54,7 @@ TEST(PatchBaselines, NearestReturnsTheClosestExample) {
   Eigen::MatrixXf T, C, W;
   LinearData(50, 16, 2, &T, &C, &W);
   PatchBaselineOptions o;
-  o.regressor = "nearest";
+  o.regressor = PatchRegressor::kNearest;
   const PatchBaseline b = FitPatchBaseline(T, C, o);
   ASSERT_EQ(b.examples.rows(), 50);
   // A training patch, slightly perturbed, finds itself.
@@ -65,8 +66,8 @@ TEST(PatchBaselines, NearestReturnsTheClosestExample) {
   // Subsampling keeps nearest_max_examples evenly spread examples.
   o.nearest_max_examples = 10;
   EXPECT_EQ(FitPatchBaseline(T, C, o).examples.rows(), 10);
-  o.regressor = "cubic";
-  EXPECT_THROW(FitPatchBaseline(T, C, o), Error);
+  EXPECT_ERROR_HAS(SetOptionsFromJson(R"({"regressor": "cubic"})", "test", &o),
+                   "test: option 'regressor' must be one of: ferns, ridge, nearest, got \"cubic\"");
 }
 
 }  // namespace

@@ -23,13 +23,9 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
+using testing::AngleDiffMod180;
 using testing::LineTexture;
 using testing::TexelOptions;
-
-double AngleDiffMod180(double a_deg, double b_deg) {
-  const double d = std::fmod(std::abs(a_deg - b_deg), 180.0);
-  return std::min(d, 180.0 - d);
-}
 
 bool SameBytes(const cv::Mat& x, const cv::Mat& y) {
   return x.size() == y.size() && x.type() == y.type() && std::equal(x.datastart, x.dataend, y.datastart);

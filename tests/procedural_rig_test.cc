@@ -14,10 +14,13 @@
 
 #include "core/error.h"
 #include "core/uv_raster.h"
+#include "tests/synth_test_util.h"
 #include "tests/test_util.h"
 
 namespace crease {
 namespace {
+
+using testing::ExpressionWeights;
 
 namespace fs = std::filesystem;
 using Eigen::Vector2d;
@@ -26,16 +29,6 @@ using Eigen::Vector3d;
 const FaceRig& Rig() {
   static const FaceRig rig = BuildProceduralRig();
   return rig;
-}
-
-Eigen::VectorXd Weights(const FaceRig& rig, const std::vector<std::pair<std::string, double>>& w) {
-  Eigen::VectorXd b = Eigen::VectorXd::Zero(rig.num_expressions());
-  for (const auto& [name, value] : w) {
-    const int e = rig.ExpressionIndex(name);
-    EXPECT_GE(e, 0) << name;
-    if (e >= 0) b[e] = value;
-  }
-  return b;
 }
 
 Vector3d Landmark(const FaceRig& rig, const MatX3d& V, int ibug) {
@@ -182,7 +175,7 @@ TEST(ProceduralRig, FaceChartInsideUnitSquareWithoutOverlapsAndLowDistortion) {
 TEST(ProceduralRig, MirrorSymmetricNeutralAndExpressionPairs) {
   const FaceRig& rig = Rig();
   // Separate the lips' coincident vertices with jawOpen, so the map pairs upper with upper.
-  const MatX3d open = rig.EvaluatePositions({}, Weights(rig, {{"jawOpen", 1.0}}));
+  const MatX3d open = rig.EvaluatePositions({}, ExpressionWeights(rig, {{"jawOpen", 1.0}}));
   const std::vector<int> mirror = MirrorMap(open, 1e-4);
   for (int v = 0; v < rig.num_vertices(); ++v) ASSERT_GE(mirror[v], 0) << "vertex " << v << " has no mirror";
   int pairs = 0;
@@ -190,8 +183,8 @@ TEST(ProceduralRig, MirrorSymmetricNeutralAndExpressionPairs) {
     if (name.size() < 2 || name.substr(name.size() - 2) != "_L") continue;
     const std::string other = name.substr(0, name.size() - 2) + "_R";
     ASSERT_GE(rig.ExpressionIndex(other), 0) << other;
-    const MatX3d L = rig.EvaluatePositions({}, Weights(rig, {{name, 1.0}}));
-    const MatX3d Rr = rig.EvaluatePositions({}, Weights(rig, {{other, 1.0}}));
+    const MatX3d L = rig.EvaluatePositions({}, ExpressionWeights(rig, {{name, 1.0}}));
+    const MatX3d Rr = rig.EvaluatePositions({}, ExpressionWeights(rig, {{other, 1.0}}));
     double err = 0.0, moved = 0.0;
     for (int v = 0; v < rig.num_vertices(); ++v) {
       const Vector3d m(-L(mirror[v], 0), L(mirror[v], 1), L(mirror[v], 2));
@@ -208,13 +201,13 @@ TEST(ProceduralRig, MirrorSymmetricNeutralAndExpressionPairs) {
 TEST(ProceduralRig, BlinkClosesTheEyes) {
   const FaceRig& rig = Rig();
   const MatX3d& N = rig.neutral.V;
-  const MatX3d B = rig.EvaluatePositions({}, Weights(rig, {{"eyeBlink_L", 1.0}, {"eyeBlink_R", 1.0}}));
+  const MatX3d B = rig.EvaluatePositions({}, ExpressionWeights(rig, {{"eyeBlink_L", 1.0}, {"eyeBlink_R", 1.0}}));
   for (auto [up, low] : {std::pair{38, 42}, {39, 41}, {44, 48}, {45, 47}}) {
     EXPECT_GT((Landmark(rig, N, up) - Landmark(rig, N, low)).norm(), 5.0) << up;
     EXPECT_LT((Landmark(rig, B, up) - Landmark(rig, B, low)).norm(), 0.05) << up;
   }
   // One eye only: the other stays open.
-  const MatX3d L = rig.EvaluatePositions({}, Weights(rig, {{"eyeBlink_L", 1.0}}));
+  const MatX3d L = rig.EvaluatePositions({}, ExpressionWeights(rig, {{"eyeBlink_L", 1.0}}));
   EXPECT_LT((Landmark(rig, L, 44) - Landmark(rig, L, 48)).norm(), 0.05);
   EXPECT_GT((Landmark(rig, L, 38) - Landmark(rig, L, 42)).norm(), 5.0);
 }
@@ -223,7 +216,7 @@ TEST(ProceduralRig, JawOpenPartsTheLipsOntoTheCavity) {
   const FaceRig& rig = Rig();
   const MatX3d& N = rig.neutral.V;
   EXPECT_LT((Landmark(rig, N, 63) - Landmark(rig, N, 67)).norm(), 0.5);  // closed at neutral
-  const MatX3d J = rig.EvaluatePositions({}, Weights(rig, {{"jawOpen", 1.0}}));
+  const MatX3d J = rig.EvaluatePositions({}, ExpressionWeights(rig, {{"jawOpen", 1.0}}));
   EXPECT_GT((Landmark(rig, J, 63) - Landmark(rig, J, 67)).norm(), 10.0);
   EXPECT_LT((Landmark(rig, J, 63) - Landmark(rig, N, 63)).norm(), 1.0);  // the upper lip stays
   // The chin moves down and back (rotation about the hinge).
@@ -270,20 +263,20 @@ TEST(ProceduralRig, ExpressionsCompressTheSkinWhereWrinklesForm) {
   EXPECT_DOUBLE_EQ(n0, 1.0);
   EXPECT_DOUBLE_EQ(n1, 1.0);
   // Brow raise: the forehead shortens vertically (horizontal forehead lines).
-  const MatX3d brow = rig.EvaluatePositions({}, Weights(rig, {{"browInnerUp_L", 1.0}, {"browInnerUp_R", 1.0}}));
+  const MatX3d brow = rig.EvaluatePositions({}, ExpressionWeights(rig, {{"browInnerUp_L", 1.0}, {"browInnerUp_R", 1.0}}));
   EXPECT_LT(ExtentRatio(rig, brow, "forehead", 1).first, 0.85);
-  const MatX3d outer = rig.EvaluatePositions({}, Weights(rig, {{"browOuterUp_L", 1.0}}));
+  const MatX3d outer = rig.EvaluatePositions({}, ExpressionWeights(rig, {{"browOuterUp_L", 1.0}}));
   EXPECT_LT(ExtentRatio(rig, outer, "forehead", 1).first, 0.85);
   // Frown: the glabella narrows (vertical "11" lines).
-  const MatX3d frown = rig.EvaluatePositions({}, Weights(rig, {{"browDown_L", 1.0}, {"browDown_R", 1.0}}));
+  const MatX3d frown = rig.EvaluatePositions({}, ExpressionWeights(rig, {{"browDown_L", 1.0}, {"browDown_R", 1.0}}));
   EXPECT_LT(ExtentRatio(rig, frown, "glabella", 0).first, 0.85);
   // Squint and smile: compression at the outer eye corner (crow's feet).
   for (const char* e : {"eyeSquint_L", "mouthSmile_L", "cheekSquint_L"}) {
-    const MatX3d s = rig.EvaluatePositions({}, Weights(rig, {{e, 1.0}}));
+    const MatX3d s = rig.EvaluatePositions({}, ExpressionWeights(rig, {{e, 1.0}}));
     EXPECT_LT(std::min(ExtentRatio(rig, s, "left_eye", 0).first, ExtentRatio(rig, s, "left_eye", 1).first), 0.85) << e;
   }
   // Nose wrinkle: the nose bridge shortens vertically (bunny lines).
-  const MatX3d sneer = rig.EvaluatePositions({}, Weights(rig, {{"noseSneer_L", 1.0}, {"noseSneer_R", 1.0}}));
+  const MatX3d sneer = rig.EvaluatePositions({}, ExpressionWeights(rig, {{"noseSneer_L", 1.0}, {"noseSneer_R", 1.0}}));
   EXPECT_LT(ExtentRatio(rig, sneer, "nose", 1).first, 0.85);
 }
 

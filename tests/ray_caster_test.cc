@@ -371,7 +371,7 @@ TEST(RayCaster, BuildQualitiesAndRobustModeGiveTheSameHits) {
   for (const char* quality : {"low", "medium", "high"}) {
     for (const bool robust : {false, true}) {
       RayCasterOptions options;
-      options.build_quality = quality;
+      options.build_quality = FromString<BvhBuildQuality>(quality, "build_quality");
       options.robust = robust;
       const RayCaster caster(sphere, options);
       std::vector<Hit> hits;
@@ -402,15 +402,14 @@ TEST(RayCaster, IsMovable) {
 
 TEST(RayCaster, OptionsAreCheckedAndSettableByName) {
   RayCasterOptions options;
-  options.build_quality = "ultra";
-  const std::string message = ErrorOf([&] { RayCaster caster(MakeGrid(1, 1, 1.0, 1.0), options); });
-  EXPECT_NE(message.find("RayCasterOptions.build_quality"), std::string::npos) << message;
+  const std::string message = ErrorOf([&] { SetOptionsFromJson(R"({"build_quality": "ultra"})", "test.json", &options); });
+  EXPECT_NE(message.find("build_quality"), std::string::npos) << message;
   EXPECT_NE(message.find("ultra"), std::string::npos) << message;
   EXPECT_NE(message.find("low, medium, high"), std::string::npos) << message;
 
   RayCasterOptions from_json;
   SetOptionsFromJson(R"({"build_quality": "high", "robust": true, "dynamic": true})", "test.json", &from_json);
-  EXPECT_EQ(from_json.build_quality, "high");
+  EXPECT_EQ(from_json.build_quality, BvhBuildQuality::kHigh);
   EXPECT_TRUE(from_json.robust);
   EXPECT_TRUE(from_json.dynamic);
   EXPECT_THROW(SetOptionsFromJson(R"({"build_quality": "best"})", "test.json", &from_json), Error);

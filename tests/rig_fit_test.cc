@@ -6,6 +6,7 @@
 
 #include <cmath>
 
+#include "core/options.h"
 #include "synth/procedural_rig.h"
 #include "tests/synth_test_util.h"
 #include "tests/test_util.h"
@@ -13,13 +14,9 @@
 namespace crease {
 namespace {
 
-const FaceRig& Rig() { return testing::ProceduralRig(); }
+using testing::ExpressionWeights;
 
-Eigen::VectorXd Weights(const FaceRig& rig, std::initializer_list<std::pair<const char*, double>> w) {
-  Eigen::VectorXd e = Eigen::VectorXd::Zero(rig.num_expressions());
-  for (const auto& [name, value] : w) e[rig.ExpressionIndex(name)] = value;
-  return e;
-}
+const FaceRig& Rig() { return testing::ProceduralRig(); }
 
 // Scans made by the rig itself: a known identity, known expressions, moved by a
 // known pose (scan_from_head).
@@ -36,8 +33,8 @@ KnownScans MakeScans(const FaceRig& rig, const Rigid3d& pose, bool with_uv) {
   k.identity[0] = 1.2;
   k.identity[3] = -0.8;
   k.expressions = {Eigen::VectorXd::Zero(rig.num_expressions()),
-                   Weights(rig, {{"browInnerUp_L", 0.9}, {"browInnerUp_R", 0.9}}),
-                   Weights(rig, {{"mouthSmile_L", 0.6}, {"jawOpen", 0.3}})};
+                   ExpressionWeights(rig, {{"browInnerUp_L", 0.9}, {"browInnerUp_R", 0.9}}),
+                   ExpressionWeights(rig, {{"mouthSmile_L", 0.6}, {"jawOpen", 0.3}})};
   for (size_t j = 0; j < k.expressions.size(); ++j) {
     TriMesh m = rig.Evaluate(k.identity, k.expressions[j]);
     for (int v = 0; v < m.num_vertices(); ++v) m.V.row(v) = (pose * Eigen::Vector3d(m.V.row(v))).transpose();
@@ -57,7 +54,7 @@ TEST(RigFit, UvCorrespondencesRecoverIdentityAndExpressions) {
   o.expression_prior = 0.0;
   o.max_fit_vertices = 800;
   const RigFitResult r = FitRigToScans(rig, k.scans, k.names, o);
-  EXPECT_EQ(r.correspondence, "uv");
+  EXPECT_EQ(r.correspondence, RigCorrespondence::kUv);
   for (double rms : r.rms_mm) EXPECT_LT(rms, 0.05);
   EXPECT_LT((r.identity - k.identity).cwiseAbs().maxCoeff(), 0.1);
   for (size_t j = 0; j < k.expressions.size(); ++j) {
@@ -79,7 +76,7 @@ TEST(RigFit, ClosestPointsRecoverAPoseFromRoughAlignment) {
   o.max_fit_vertices = 600;
   o.closest_point_iterations = 4;
   const RigFitResult r = FitRigToScans(rig, k.scans, k.names, o);
-  EXPECT_EQ(r.correspondence, "closest");
+  EXPECT_EQ(r.correspondence, RigCorrespondence::kClosest);
   for (size_t j = 0; j < k.scans.size(); ++j) {
     // Point-to-plane against the nearest vertex of a coarse (2 mm) mesh: ~0.1 mm of
     // curvature error remains even at the exact pose.
@@ -116,10 +113,10 @@ TEST(RigFit, BadInput) {
   const FaceRig& rig = Rig();
   KnownScans k = MakeScans(rig, Rigid3d(), true);
   RigFitOptions o;
-  o.correspondence = "nearest";
-  EXPECT_ERROR_HAS(o.Check(), "correspondence");
+  EXPECT_ERROR_HAS(SetOptionsFromJson(R"({"correspondence": "nearest"})", "test", &o),
+                   "test: option 'correspondence' must be one of: auto, uv, closest, got \"nearest\"");
   RigFitOptions far;
-  far.correspondence = "closest";
+  far.correspondence = RigCorrespondence::kClosest;
   for (auto& m : k.scans) m.V.array() += 500.0;  // nowhere near the rig
   EXPECT_ERROR_HAS(FitRigToScans(rig, k.scans, k.names, far), "roughly aligned");
 }

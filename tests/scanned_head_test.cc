@@ -102,7 +102,7 @@ TEST(ScannedHead, NormalMapSetsTheShadingNormals) {
   dx.normal_map_green_down = true;
   expect_all(normals("green.exr", dx), {0, s, c}, "green, DirectX");
   ScannedHeadOptions object = so;
-  object.normal_map_space = "object";
+  object.normal_map_space = NormalMapSpace::kObject;
   expect_all(normals("object.exr", object), {0, -1, 0}, "object space");
 
   // Errors name the file.
@@ -207,7 +207,7 @@ TEST(ScannedHead, ReadsGltfWithItsBaseColourTexture) {
   // A three.js-style asset: the same file in centimetres with v up, as the user says.
   ScannedHeadOptions cm;
   cm.units_to_mm = 10.0;
-  cm.v_up = "yes";
+  cm.v_up = TextureVUp::kYes;
   const ScannedHead small = LoadScannedHead(dir / "head.gltf", "", "", cm);
   EXPECT_LT((small.surface.V - grid.V * 10.0).cwiseAbs().maxCoeff(), 1e-4);
   EXPECT_LT((small.surface.UV.col(1) - (1.0 - grid.UV.col(1).array()).matrix()).cwiseAbs().maxCoeff(), 1e-6);

@@ -5,6 +5,8 @@
 
 #include <filesystem>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -26,6 +28,19 @@ inline std::filesystem::path FixtureDir(const std::string& name) {
       std::filesystem::path(::testing::TempDir()) / "crease_tests" / (name + "_" + std::to_string(getpid()));
   std::filesystem::remove_all(d);
   return d;
+}
+
+// Expression weights β (one per blendshape of `rig`) with the named ones set and
+// the rest 0; a name the rig does not have fails the test.
+inline Eigen::VectorXd ExpressionWeights(const FaceRig& rig,
+                                         const std::vector<std::pair<std::string, double>>& weights) {
+  Eigen::VectorXd beta = Eigen::VectorXd::Zero(rig.num_expressions());
+  for (const auto& [name, value] : weights) {
+    const int e = rig.ExpressionIndex(name);
+    EXPECT_GE(e, 0) << name;
+    if (e >= 0) beta[e] = value;
+  }
+  return beta;
 }
 
 }  // namespace crease::testing

@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "core/image_io.h"
+#include "core/options.h"
 #include "eval/tracking_metrics.h"
 #include "pipeline/capture/frame_source.h"
 #include "synth/dataset.h"
@@ -269,10 +270,10 @@ TEST(Tracker, NoFaceIsALossNotACrash) {
     EXPECT_EQ(t.confidence, 0.0);
   }
   TrackerOptions bad;
-  bad.landmark_source = "regressor";
+  bad.landmark_source = LandmarkSourceKind::kRegressor;
   EXPECT_ERROR_HAS(bad.Check(), "tracker_model");
-  bad.landmark_source = "oracle";
-  EXPECT_ERROR_HAS(bad.Check(), "landmark_source");
+  EXPECT_ERROR_HAS(SetOptionsFromJson(R"({"landmark_source": "oracle"})", "test", &bad),
+                   "test: option 'landmark_source' must be one of: dlib, regressor, got \"oracle\"");
 }
 
 }  // namespace

@@ -22,13 +22,9 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
+using testing::AngleDiffMod180;
 using testing::LineTexture;
 using testing::TexelOptions;
-
-double AngleDiffMod180(double a_deg, double b_deg) {
-  double d = std::fmod(std::abs(a_deg - b_deg), 180.0);
-  return std::min(d, 180.0 - d);
-}
 
 TEST(WrinkleMapOptionsTest, DefaultsArePaperValues) {
   const WrinkleMapOptions o;

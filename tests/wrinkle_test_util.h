@@ -1,6 +1,7 @@
 // Synthetic textures and options shared by the wrinkle-map and patch tests.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -34,6 +35,12 @@ inline cv::Mat LineTexture(int S, double line_deg, double depth = 0.2, double wi
     }
   }
   return t;
+}
+
+// |a − b| between two orientations (lines), degrees in [0, 90].
+inline double AngleDiffMod180(double a_deg, double b_deg) {
+  const double d = std::fmod(std::abs(a_deg - b_deg), 180.0);
+  return std::min(d, 180.0 - d);
 }
 
 }  // namespace crease::testing

@@ -43,7 +43,8 @@ double SecondsSince(std::chrono::steady_clock::time_point t0) {
 void RunCaptureCommand(CaptureArgs& a) {
   TrackingFlags& tf = a.tf;
   CaptureOptions options;
-  options.tracker.landmark_source = tf.tracker_model.empty() ? tf.landmarks : "regressor";
+  options.tracker.landmark_source = tf.tracker_model.empty() ? FromString<LandmarkSourceKind>(tf.landmarks, "--landmarks")
+                                                             : LandmarkSourceKind::kRegressor;
   options.tracker.tracker_model = tf.tracker_model;
   if (!a.config.empty()) SetOptionsFromYaml(ReadFileToString(a.config), a.config, &options);
   if (!a.sets.empty()) SetOptionsFromJson(SetPairsToJson(a.sets), "--set", &options);

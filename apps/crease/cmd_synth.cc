@@ -70,7 +70,7 @@ void AddSynthCommands(CLI::App& app) {
     cmd->add_option("--out,-o", out, "Output rig file (.crig)")->required();
     cmd->add_option("--head", head, "ict: the realistic ICT-FaceKit head (default, synth/ict_head.h); "
                                     "procedural: the SDF head (synth/procedural_rig.h)")
-        ->check(CLI::IsMember({"ict", "procedural"}));
+        ->check(CLI::IsMember(EnumNames<StudioHead>()));
     cmd->add_option("--from", from, "With --head ict: the imported ICT rig (default: the vendored "
                                     "data/ict/ict_face_light.crig)");
     cmd->add_option("--set", sets, "Rig option KEY=VALUE (repeatable): ict.identity_modes=40, procedural.face_columns=72 "
@@ -80,7 +80,7 @@ void AddSynthCommands(CLI::App& app) {
     cmd->callback([] {
       StudioRigOptions opt;
       if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &opt);
-      if (!head.empty()) opt.head = head;
+      if (!head.empty()) opt.head = FromString<StudioHead>(head, "--head");
       if (!from.empty()) opt.ict_rig = from;
       const FaceRig rig = BuildStudioRig(opt);
       WriteRig(out, rig);

@@ -256,6 +256,7 @@ void AddScansCommand(CLI::App* synth) {
 // synth render-scan
 struct RenderScanArgs {
   std::string mesh, albedo, displacement, normal_map, units, light = "studio", size, out;
+  std::string normal_space = ToString(ScannedHeadOptions().normal_map_space);
   ScannedHeadOptions so;
   double yaw = 0, fov = 30;
   int samples = 2;
@@ -287,6 +288,7 @@ Camera FramingCamera(const TriMesh& m, double fov_deg, int width, int height) {
 
 void RunRenderScan(RenderScanArgs& a) {
   if (!a.units.empty()) a.so.units_to_mm = UnitsToMm(a.units);
+  a.so.normal_map_space = FromString<NormalMapSpace>(a.normal_space, "--normal-space");
   const ScannedHead head = LoadScannedHead(a.mesh, a.albedo, a.displacement, a.so, a.normal_map);
   for (const auto& w : head.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   StudioOptions studio;
@@ -315,15 +317,15 @@ void AddRenderScanCommand(CLI::App* synth) {
                                          "files with a base colour texture");
   cmd->add_option("--displacement", a->displacement, "Displacement map in the same UV layout (EXR, PNG)");
   cmd->add_option("--normal-map", a->normal_map, "Normal map in the same UV layout (RGB; tangent space unless --normal-space object)");
-  cmd->add_option("--normal-space", so.normal_map_space, "Space of the normal map")->check(CLI::IsMember({"tangent", "object"}))->capture_default_str();
+  cmd->add_option("--normal-space", a->normal_space, "Space of the normal map")->check(CLI::IsMember(EnumNames<NormalMapSpace>()))->capture_default_str();
   cmd->add_flag("--normal-green-down", so.normal_map_green_down, "Tangent-space map in the DirectX convention (green = −v)");
   cmd->add_option("--displacement-scale", so.displacement_scale_mm, "mm per unit of the displacement map")->capture_default_str();
   cmd->add_option("--midlevel", so.displacement_midlevel, "Map value of zero displacement (0.5 for 8-bit maps)")->capture_default_str();
   cmd->add_option("--grid", so.grid_resolution, "Resampling grid for the displacement, texels per side")->capture_default_str();
   cmd->add_option("--units", a->units, "Units of the mesh coordinates (default: glTF's metres, mm for OBJ/PLY)")
       ->check(CLI::IsMember({"mm", "cm", "m"}));
-  cmd->add_flag("--keep-v", [a](int64_t) { a->so.v_up = "no"; }, "The file's texture v grows downwards (glTF's default)");
-  cmd->add_flag("--flip-v", [a](int64_t) { a->so.v_up = "yes"; }, "The file's texture v grows upwards (OBJ/PLY's default; "
+  cmd->add_flag("--keep-v", [a](int64_t) { a->so.v_up = TextureVUp::kNo; }, "The file's texture v grows downwards (glTF's default)");
+  cmd->add_flag("--flip-v", [a](int64_t) { a->so.v_up = TextureVUp::kYes; }, "The file's texture v grows upwards (OBJ/PLY's default; "
                                                                   "e.g. three.js glTF assets)");
   cmd->add_option("--light", a->light, "Light rig: " + LightChoices())
       ->capture_default_str();

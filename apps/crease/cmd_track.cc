@@ -42,7 +42,8 @@ void AddTrackCommand(CLI::App& app) {
   cmd->add_option("--set", sets, "Tracker option KEY=VALUE (repeatable; pipeline/capture/tracker.h TrackerOptions)");
   cmd->callback([] {
     TrackerOptions options;
-    options.landmark_source = tf.tracker_model.empty() ? tf.landmarks : "regressor";
+    options.landmark_source = tf.tracker_model.empty() ? FromString<LandmarkSourceKind>(tf.landmarks, "--landmarks")
+                                                       : LandmarkSourceKind::kRegressor;
     options.tracker_model = tf.tracker_model;
     if (!sets.empty()) SetOptionsFromJson(SetPairsToJson(sets), "--set", &options);
     options.Check();

@@ -9,6 +9,7 @@
 #include "core/dataset_info.h"
 #include "core/error.h"
 #include "core/json_io.h"
+#include "core/options.h"
 #include "eval/rig_correspondence.h"
 #include "eval/tracking_metrics.h"
 
@@ -69,7 +70,7 @@ FrameTracker::FrameTracker(const FaceRig& rig, const CameraIntrinsics& intrinsic
     source_ = "ground-truth-prior";
   } else {
     tracker_ = std::make_unique<FaceTracker>(rig, intrinsics, MakeLandmarkSource(options), options);
-    source_ = options.landmark_source;
+    source_ = ToString(options.landmark_source);
   }
 }
 

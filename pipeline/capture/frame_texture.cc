@@ -17,6 +17,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/error.h"
+#include "core/image_filter.h"
 #include "core/options.h"
 
 namespace crease {
@@ -558,26 +559,9 @@ cv::Mat MesoscopicMap(const cv::Mat& gray_texture, const cv::Mat& seen, const Me
           fmt::format("MesoscopicMap: seen mask must be CV_8UC1 {}×{} like the texture, got {}×{} type {}",
                       gray_texture.cols, gray_texture.rows, seen.cols, seen.rows, seen.type()));
   const int R = gray_texture.rows;
-  cv::Mat tm(R, R, CV_32F), mask(R, R, CV_32F);
-  std::vector<int> bad(static_cast<size_t>(R), 0);
-  ForRows(R, 16, [&](int y) {
-    const float* t = gray_texture.ptr<float>(y);
-    const uint8_t* s = seen.ptr<uint8_t>(y);
-    float* o = tm.ptr<float>(y);
-    float* mk = mask.ptr<float>(y);
-    for (int x = 0; x < R; ++x) {
-      if (s[x]) {
-        if (!std::isfinite(t[x])) ++bad[static_cast<size_t>(y)];
-        o[x] = t[x];
-        mk[x] = 1.0f;
-      } else {
-        o[x] = 0.0f;
-        mk[x] = 0.0f;
-      }
-    }
-  });
-  int num_bad = 0;
-  for (const int b : bad) num_bad += b;
+  long num_bad = 0;
+  cv::Mat mask;
+  const cv::Mat tm = ZeroOutsideMask(gray_texture, seen, &num_bad, &mask);
   Require(num_bad == 0, fmt::format("MesoscopicMap: {} seen texels are not finite (NaN or inf)", num_bad));
 
   int ws = 1, wl = 1;
@@ -586,22 +570,8 @@ cv::Mat MesoscopicMap(const cv::Mat& gray_texture, const cv::Mat& seen, const Me
   ScaledKernel(options.meso_large_kernel, R, options.meso_reference_resolution, &wl, &sl);
   const cv::Mat ns = GaussianConstant(tm, ws, ss), ds = GaussianConstant(mask, ws, ss);
   const cv::Mat nl = GaussianConstant(tm, wl, sl), dl = GaussianConstant(mask, wl, sl);
-  const float gamma = static_cast<float>(options.meso_scale);
-  constexpr float kMinWeight = 1e-6f;
-  cv::Mat out(R, R, CV_32F);
-  ForRows(R, 16, [&](int y) {
-    const uint8_t* s = seen.ptr<uint8_t>(y);
-    const float* a = ns.ptr<float>(y);
-    const float* b = ds.ptr<float>(y);
-    const float* c = nl.ptr<float>(y);
-    const float* d = dl.ptr<float>(y);
-    float* o = out.ptr<float>(y);
-    for (int x = 0; x < R; ++x) {
-      // D^HF = γ (G_small * T − G_large * T), normalised over `seen` (Sec. 5.3).
-      o[x] = (s[x] && b[x] > kMinWeight && d[x] > kMinWeight) ? gamma * (a[x] / b[x] - c[x] / d[x]) : 0.0f;
-    }
-  });
-  return out;
+  // D^HF = γ (G_small * T − G_large * T), normalised over `seen` (Sec. 5.3).
+  return NormalisedDifference(ns, ds, nl, dl, seen, static_cast<float>(options.meso_scale));
 }
 
 }  // namespace crease

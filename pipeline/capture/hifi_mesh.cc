@@ -54,9 +54,20 @@ class ChartBoundary {
   bool Crosses(const Eigen::Vector2d& p, const Eigen::Vector2d& q) const;
 
  private:
-  void BucketRange(double lo, double hi, int* b0, int* b1) const {
-    *b0 = std::clamp(static_cast<int>(std::floor(lo)), 0, N_ - 1);
-    *b1 = std::clamp(static_cast<int>(std::floor(hi)), 0, N_ - 1);
+  // The grid cell of coordinate c, clamped to the grid.
+  int Cell(double c) const { return std::clamp(static_cast<int>(std::floor(c)), 0, N_ - 1); }
+  // Calls f(b) for the cells b (row-major) of the bounding box of segment pq, row by
+  // row, until f returns true; returns whether it did.
+  template <class F>
+  bool AnyCell(const Eigen::Vector2d& p, const Eigen::Vector2d& q, const F& f) const {
+    const int x0 = Cell(std::min(p.x(), q.x())), x1 = Cell(std::max(p.x(), q.x()));
+    const int y0 = Cell(std::min(p.y(), q.y())), y1 = Cell(std::max(p.y(), q.y()));
+    for (int y = y0; y <= y1; ++y) {
+      for (int x = x0; x <= x1; ++x) {
+        if (f(static_cast<size_t>(y) * N_ + x)) return true;
+      }
+    }
+    return false;
   }
 
   int N_;
@@ -94,19 +105,14 @@ ChartBoundary::ChartBoundary(const TriMesh& chart, int N) : N_(N) {
     }
     for (size_t e = 0; e < boundary_.size(); ++e) {
       const auto& [p, q] = boundary_[e];
-      int x0, x1, y0, y1;
-      BucketRange(std::min(p.x(), q.x()), std::max(p.x(), q.x()), &x0, &x1);
-      BucketRange(std::min(p.y(), q.y()), std::max(p.y(), q.y()), &y0, &y1);
-      for (int y = y0; y <= y1; ++y) {
-        for (int x = x0; x <= x1; ++x) {
-          const size_t b = static_cast<size_t>(y) * N + x;
-          if (pass == 0) {
-            ++bucket_offset_[b + 1];
-          } else {
-            bucket_edges_[static_cast<size_t>(cursor[b]++)] = static_cast<int>(e);
-          }
+      AnyCell(p, q, [&](size_t b) {
+        if (pass == 0) {
+          ++bucket_offset_[b + 1];
+        } else {
+          bucket_edges_[static_cast<size_t>(cursor[b]++)] = static_cast<int>(e);
         }
-      }
+        return false;
+      });
     }
   }
 }
@@ -115,20 +121,14 @@ bool ChartBoundary::Crosses(const Eigen::Vector2d& p, const Eigen::Vector2d& q) 
   auto cross2 = [](const Eigen::Vector2d& o, const Eigen::Vector2d& a, const Eigen::Vector2d& b) {
     return (a.x() - o.x()) * (b.y() - o.y()) - (a.y() - o.y()) * (b.x() - o.x());
   };
-  int x0, x1, y0, y1;
-  BucketRange(std::min(p.x(), q.x()), std::max(p.x(), q.x()), &x0, &x1);
-  BucketRange(std::min(p.y(), q.y()), std::max(p.y(), q.y()), &y0, &y1);
-  for (int y = y0; y <= y1; ++y) {
-    for (int x = x0; x <= x1; ++x) {
-      const size_t b = static_cast<size_t>(y) * N_ + x;
-      for (int k = bucket_offset_[b]; k < bucket_offset_[b + 1]; ++k) {
-        const auto& [a, c] = boundary_[static_cast<size_t>(bucket_edges_[static_cast<size_t>(k)])];
-        // Proper crossing of segments pq and ac.
-        if (cross2(p, q, a) * cross2(p, q, c) < 0 && cross2(a, c, p) * cross2(a, c, q) < 0) return true;
-      }
+  return AnyCell(p, q, [&](size_t b) {
+    for (int k = bucket_offset_[b]; k < bucket_offset_[b + 1]; ++k) {
+      const auto& [a, c] = boundary_[static_cast<size_t>(bucket_edges_[static_cast<size_t>(k)])];
+      // Proper crossing of segments pq and ac.
+      if (cross2(p, q, a) * cross2(p, q, c) < 0 && cross2(a, c, p) * cross2(a, c, q) < 0) return true;
     }
-  }
-  return false;
+    return false;
+  });
 }
 
 // The dense triangles: two per grid cell with four vertices, one where a corner is

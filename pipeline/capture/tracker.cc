@@ -23,11 +23,10 @@ void TrackerOptions::VisitFields(OptionVisitor& v) {
 
 void TrackerOptions::Check() const {
   const char* o = "TrackerOptions";
-  CheckOneOf(o, "landmark_source", landmark_source, {"dlib", "regressor"});
   CheckGe(o, "min_confidence", min_confidence, 0.0);
   CheckLt(o, "min_confidence", min_confidence, 1.0);
   CheckGt(o, "confidence_scale_iod", confidence_scale_iod, 0.0);
-  Require(landmark_source != "regressor" || !tracker_model.empty(),
+  Require(landmark_source != LandmarkSourceKind::kRegressor || !tracker_model.empty(),
           "TrackerOptions.tracker_model: the regressor needs a model file (`crease train-tracker`)");
   fit.Check();
   dlib.Check();
@@ -35,7 +34,7 @@ void TrackerOptions::Check() const {
 
 std::unique_ptr<LandmarkSource> MakeLandmarkSource(const TrackerOptions& options) {
   options.Check();
-  if (options.landmark_source == "dlib") return std::make_unique<DlibLandmarkSource>(options.dlib);
+  if (options.landmark_source == LandmarkSourceKind::kDlib) return std::make_unique<DlibLandmarkSource>(options.dlib);
   return std::make_unique<RegressorLandmarkSource>(LoadShapeRegressor(options.tracker_model));
 }
 

@@ -14,6 +14,7 @@
 // the rig is fitted to them, which keeps the landmark source pluggable.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <string>
 
@@ -28,9 +29,13 @@ namespace crease {
 
 class OptionVisitor;
 
+// TrackerOptions::landmark_source (see there).
+enum class LandmarkSourceKind { kDlib, kRegressor };
+constexpr std::array<const char*, 2> OptionEnumNames(LandmarkSourceKind) { return {"dlib", "regressor"}; }
+
 struct TrackerOptions {
   // "dlib" or "regressor" (crease's own, trained by `crease train-tracker`).
-  std::string landmark_source = "dlib";
+  LandmarkSourceKind landmark_source = LandmarkSourceKind::kDlib;
   // The regressor's model file (landmark_source = "regressor").
   std::string tracker_model;
   // A frame whose confidence is below this counts as lost (the tracker re-detects).

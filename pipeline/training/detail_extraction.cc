@@ -52,7 +52,7 @@ void DetailExtractionOptions::Check() const {
 namespace {
 
 std::optional<MeshLowpass> MakeLowpass(const TriMesh& mesh, double bandwidth_mm, int steps,
-                                       const std::string& solver = "direct", double tolerance = 1e-8) {
+                                       LowpassSolver solver = LowpassSolver::kDirect, double tolerance = 1e-8) {
   if (bandwidth_mm <= 0.0) return std::nullopt;
   LowpassOptions lo;
   lo.bandwidth_mm = bandwidth_mm;
@@ -245,13 +245,13 @@ DetailExtractor::DetailExtractor(const TriMesh& neutral, const DetailExtractionO
   }
   m.neutral = neutral;
   m.neutral.N.resize(0, 3);
-  m.hf = MakeLowpass(neutral, options.high_frequency_bandwidth_mm, options.high_frequency_steps, "iterative");
+  m.hf = MakeLowpass(neutral, options.high_frequency_bandwidth_mm, options.high_frequency_steps, LowpassSolver::kIterative);
   if (m.hf) {
     m.neutral.V = m.hf->Apply(neutral.V);
     // G^HF is linear: G^HF(M^j) = G^HF(M^0) + G^HF(M^j − M^0). The difference is
     // millimetres rather than ~100 mm, so a 1e-5 relative residual is ~1e-5 mm.
     m.hf_delta = MakeLowpass(neutral, options.high_frequency_bandwidth_mm, options.high_frequency_steps,
-                             "iterative", 1e-5);
+                             LowpassSolver::kIterative, 1e-5);
     m.input_neutral = neutral.V;
   }
   if (options.lowpass_bandwidth_mm > 0.0) {

@@ -18,7 +18,6 @@ void PatchBaselineOptions::VisitFields(OptionVisitor& v) {
 }
 
 void PatchBaselineOptions::Check() const {
-  CheckOneOf("PatchBaselineOptions", "regressor", regressor, {"ferns", "ridge", "nearest"});
   CheckGe("PatchBaselineOptions", "ridge_lambda", ridge_lambda, 0.0);
   CheckGe("PatchBaselineOptions", "nearest_max_examples", nearest_max_examples, 1);
 }
@@ -42,7 +41,7 @@ PatchBaseline FitPatchBaseline(const Eigen::MatrixXf& T, const Eigen::MatrixXf& 
   Require(T.rows() == C.rows() && T.rows() >= 1,
           fmt::format("patch baseline: {} texture patches but {} coefficient rows", T.rows(), C.rows()));
   PatchBaseline b;
-  b.kind = options.regressor == "ferns" ? "" : options.regressor;
+  b.kind = options.regressor == PatchRegressor::kFerns ? "" : ToString(options.regressor);
   b.patch_pixels = static_cast<int>(T.cols());
   b.dimensions = static_cast<int>(C.cols());
   const int n = b.patch_pixels;

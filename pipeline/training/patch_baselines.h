@@ -9,6 +9,7 @@
 // Not in the paper: it compares with no baseline.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <string>
 
@@ -18,10 +19,14 @@
 
 namespace crease {
 
+// PatchBaselineOptions::regressor (see there).
+enum class PatchRegressor { kFerns, kRidge, kNearest };
+constexpr std::array<const char*, 3> OptionEnumNames(PatchRegressor) { return {"ferns", "ridge", "nearest"}; }
+
 struct PatchBaselineOptions {
   // Which regressor the model applies at capture time: "ferns" (the paper's cascade,
   // Sec. 4.3), "ridge" or "nearest" (baselines; the cascade is still trained).
-  std::string regressor = "ferns";
+  PatchRegressor regressor = PatchRegressor::kFerns;
   double ridge_lambda = 10.0;         // λ of the ridge penalty (features are gray levels in [0, 1])
   int nearest_max_examples = 4000;    // training patches kept for the lookup (evenly subsampled)
 

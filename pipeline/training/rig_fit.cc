@@ -34,7 +34,6 @@ void RigFitOptions::VisitFields(OptionVisitor& v) {
 
 void RigFitOptions::Check() const {
   const char* o = "RigFitOptions";
-  CheckOneOf(o, "correspondence", correspondence, {"auto", "uv", "closest"});
   CheckGe(o, "identity_prior", identity_prior, 0.0);
   CheckGe(o, "expression_prior", expression_prior, 0.0);
   CheckGt(o, "robust_scale_mm", robust_scale_mm, 0.0);
@@ -283,12 +282,12 @@ RigFitResult FitRigToScans(const FaceRig& rig, const std::vector<TriMesh>& scans
   const int I = rig.num_identity(), E = rig.num_expressions();
   RigFitResult result;
   result.correspondence = options.correspondence;
-  if (result.correspondence == "auto") {
+  if (result.correspondence == RigCorrespondence::kAuto) {
     bool all_uv = true;
     for (const auto& s : scans) all_uv = all_uv && ScanHasRigUvs(rig, s);
-    result.correspondence = all_uv ? "uv" : "closest";
+    result.correspondence = all_uv ? RigCorrespondence::kUv : RigCorrespondence::kClosest;
   }
-  const bool uv_mode = result.correspondence == "uv";
+  const bool uv_mode = result.correspondence == RigCorrespondence::kUv;
 
   // The seeded subset of face-chart vertices.
   std::vector<int> verts = FaceChartVertices(rig);

@@ -41,10 +41,14 @@ class OptionVisitor;
 enum class ClosestPointMetric { kPoint, kPlane };
 constexpr std::array<const char*, 2> OptionEnumNames(ClosestPointMetric) { return {"point", "plane"}; }
 
+// RigFitOptions::correspondence and the path RigFitResult took.
+enum class RigCorrespondence { kAuto, kUv, kClosest };
+constexpr std::array<const char*, 3> OptionEnumNames(RigCorrespondence) { return {"auto", "uv", "closest"}; }
+
 struct RigFitOptions {
   // "uv", "closest", or "auto" (uv when the scans have UVs covering the rig's
   // face chart, else closest).
-  std::string correspondence = "auto";
+  RigCorrespondence correspondence = RigCorrespondence::kAuto;
   // λ_α: prior weight of the identity coefficients, in mm² of mean squared residual
   // per unit coefficient².
   double identity_prior = 0.01;
@@ -66,7 +70,7 @@ struct RigFitOptions {
 };
 
 struct RigFitResult {
-  std::string correspondence;                // the path taken: "uv" or "closest"
+  RigCorrespondence correspondence{};        // the path taken: kUv or kClosest
   Eigen::VectorXd identity;                  // α
   std::vector<Eigen::VectorXd> expressions;  // β^j
   std::vector<Rigid3d> scan_from_head;       // (ω^j, t^j)

@@ -282,8 +282,8 @@ RigFitResult FitRigToActor(const ExtractionContext& ctx, const std::string& acto
   RigFitResult fit = FitRigToScans(ctx.rig, *meshes, names, ctx.options.fit);
   ctx.sum.timing.Add("rig fit (Ceres)", Since(t0));
   ctx.Log(fmt::format("{}: rig fit ({} correspondences) RMS {:.3f} mm, |identity| = {:.2f}", actor_name,
-                      fit.correspondence, fmt::join(fit.rms_mm, " / "), fit.identity.norm()));
-  if (fit.correspondence == "closest") {
+                      ToString(fit.correspondence), fmt::join(fit.rms_mm, " / "), fit.identity.norm()));
+  if (fit.correspondence == RigCorrespondence::kClosest) {
     t0 = Clock::now();
     std::vector<int> kept;
     const TriMesh cut =
@@ -474,7 +474,7 @@ TrainingPatches ActorTrainingPairs(const ExtractionContext& ctx, const ScanActor
   as->scans = static_cast<int>(meshes.size());
   ctx.sum.timing.Add("read scans", Since(t0), as->scans);
   const RigFitResult fit = FitRigToActor(ctx, actor.name, &meshes, names);
-  as->correspondence = fit.correspondence;
+  as->correspondence = ToString(fit.correspondence);
   as->fit_rms_mm = fit.rms_mm;
 
   // Sec. 4.1: D^j and T^j for every scan.
@@ -635,12 +635,12 @@ DetailModel TrainDetailModelFromPairs(const TrainingPairs& pairs, const Training
   log(fmt::format("fern cascade: K = {}, training RMSE of coefficients {:.4f} → {:.4f}", options.ferns.num_ferns,
                   trained.report.train_rmse.front(), trained.report.train_rmse.back()));
   model.cascade = std::move(trained.cascade);
-  if (options.baseline.regressor != "ferns") {
+  if (options.baseline.regressor != PatchRegressor::kFerns) {
     t0 = Clock::now();
     model.baseline = FitPatchBaseline(T, targets, options.baseline);
     sum.timing.Add("baseline regressor", Since(t0));
     log(fmt::format("baseline regressor '{}' fitted; capture applies it instead of the cascade",
-                    options.baseline.regressor));
+                    ToString(options.baseline.regressor)));
   }
   model.map_resolution = R;
   model.wrinkle = options.wrinkle;

@@ -12,6 +12,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/error.h"
+#include "core/image_filter.h"
 #include "core/options.h"
 
 namespace crease {
@@ -57,7 +58,7 @@ namespace {
 
 // Denominators below this (a fraction of the kernel's mass) count as "no data":
 // a covered texel always carries at least the weight of its own kernel tap.
-constexpr float kMinWeight = 1e-6f;
+constexpr float kMinWeight = kMinNormalisedWeight;
 
 template <class F>
 void ForRows(int rows, const F& f) {
@@ -125,25 +126,8 @@ class DogFilter {
     Require(texture.rows == coverage_.rows,
             fmt::format("{}: texture is {}x{}, expected {}x{} (the coverage / map size)", what, texture.cols,
                         texture.rows, coverage_.cols, coverage_.rows));
-    cv::Mat tm(texture.size(), CV_32F);
-    std::vector<int> bad_rows(texture.rows, 0);
-    ForRows(texture.rows, [&](int y) {
-      const float* t = texture.ptr<float>(y);
-      const uint8_t* c = coverage_.ptr<uint8_t>(y);
-      float* o = tm.ptr<float>(y);
-      int bad = 0;
-      for (int x = 0; x < texture.cols; ++x) {
-        if (c[x]) {
-          if (!std::isfinite(t[x])) ++bad;
-          o[x] = t[x];
-        } else {
-          o[x] = 0.0f;
-        }
-      }
-      bad_rows[y] = bad;
-    });
     long bad = 0;
-    for (int b : bad_rows) bad += b;
+    cv::Mat tm = ZeroOutsideMask(texture, coverage_, &bad);
     Require(bad == 0, fmt::format("{}: {} covered texels are not finite (NaN or inf)", what, bad));
     return tm;
   }
@@ -152,19 +136,7 @@ class DogFilter {
   cv::Mat Response(const cv::Mat& tm) const {
     const cv::Mat num_small = Blur(tm, sigma_small_);
     const cv::Mat num_large = Blur(tm, sigma_large_);
-    cv::Mat r(tm.size(), CV_32F);
-    ForRows(tm.rows, [&](int y) {
-      const uint8_t* c = coverage_.ptr<uint8_t>(y);
-      const float* ns = num_small.ptr<float>(y);
-      const float* nl = num_large.ptr<float>(y);
-      const float* ds = den_small_.ptr<float>(y);
-      const float* dl = den_large_.ptr<float>(y);
-      float* o = r.ptr<float>(y);
-      for (int x = 0; x < tm.cols; ++x) {
-        o[x] = (c[x] && ds[x] > kMinWeight && dl[x] > kMinWeight) ? nl[x] / dl[x] - ns[x] / ds[x] : 0.0f;
-      }
-    });
-    return r;
+    return NormalisedDifference(num_large, den_large_, num_small, den_small_, coverage_, 1.0f);
   }
 
   // The texture gradient for the orientation (Difference 4): central differences
