@@ -74,22 +74,7 @@ DetailModel NoiseModel() {
 
 // The tiny sequence dataset: frames 0–4 of the wrinkle workout, 160×120, front light.
 fs::path TinySequence() {
-  static const fs::path dir = [] {
-    const fs::path d = testing::FixtureDir("capture_run_sequence");
-    ActorOptions ao;
-    ao.resolution = 256;
-    ao.surface_min_vertices = 1000;
-    SequenceDatasetOptions o;
-    o.studio.width = 160;
-    o.studio.height = 120;
-    o.studio.samples_per_axis = 1;
-    o.studio.light = "front";
-    o.write_maps = false;
-    o.max_frames = kFrames;
-    o.tracking_parts.clear();
-    WriteSequenceDataset(Rig(), GenerateActor(Rig(), 3, ao), MakePresetSequence("wrinkle-workout"), o, d);
-    return d;
-  }();
+  static const fs::path dir = testing::TinySequenceDataset("capture_run_sequence", "wrinkle-workout", kFrames);
   return dir;
 }
 

@@ -11,7 +11,10 @@
 #include <gtest/gtest.h>
 
 #include "core/face_rig.h"
+#include "synth/actor.h"
+#include "synth/dataset.h"
 #include "synth/procedural_rig.h"
+#include "synth/sequence.h"
 
 namespace crease::testing {
 
@@ -41,6 +44,26 @@ inline Eigen::VectorXd ExpressionWeights(const FaceRig& rig,
     if (e >= 0) beta[e] = value;
   }
   return beta;
+}
+
+// A tiny studio sequence dataset in FixtureDir(name): the first `frames` frames of
+// the sequence preset `preset`, actor 3 on the procedural rig, 160×120 under front
+// light, without maps or a tracking rig.
+inline std::filesystem::path TinySequenceDataset(const std::string& name, const std::string& preset, int frames) {
+  const std::filesystem::path d = FixtureDir(name);
+  ActorOptions ao;
+  ao.resolution = 256;
+  ao.surface_min_vertices = 1000;
+  SequenceDatasetOptions o;
+  o.studio.width = 160;
+  o.studio.height = 120;
+  o.studio.samples_per_axis = 1;
+  o.studio.light = "front";
+  o.write_maps = false;
+  o.max_frames = frames;
+  o.tracking_parts.clear();
+  WriteSequenceDataset(ProceduralRig(), GenerateActor(ProceduralRig(), 3, ao), MakePresetSequence(preset), o, d);
+  return d;
 }
 
 }  // namespace crease::testing

@@ -61,7 +61,7 @@ void RunCaptureCommand(CaptureArgs& a) {
   const double rig_s = SecondsSince(t0);
   std::printf("rig made compatible with the model's lowpass (Sec. 4.1) in %.1f s\n", rig_s);
   t0 = std::chrono::steady_clock::now();
-  FrameTracker tracker(rig, K, options.tracker, tf, dataset ? info.path : fs::path());
+  FrameTracker tracker(rig, K, options.tracker, tf.Control(), dataset ? info.path : fs::path());
   CaptureSession session(rig, model, K, options);
   const double setup_s = SecondsSince(t0);
   std::printf("capture set up (UV raster, geodesics, stencils) in %.1f s\n", setup_s);
