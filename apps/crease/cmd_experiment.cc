@@ -8,6 +8,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 
 #include <fmt/format.h>
 
@@ -188,38 +189,42 @@ void RunExperimentCommand(const RunArgs& a) {
 
 void AddRunCommand(CLI::App* exp) {
   auto* cmd = exp->add_subcommand("run", "Run an experiment (stages cached; a rerun resumes)");
-  static RunArgs a;
-  cmd->add_option("experiment", a.name, "Experiment name (experiments/NAME.yaml), a config file, or all")->required();
-  cmd->add_option("--profile", a.profile, "quick, paper, or another profile the config defines (e.g. detail-ladder's lights)");
-  cmd->add_option("--seeds", a.seeds, "Independent actor sets (overrides the config)");
-  cmd->add_option("--jobs,-j", a.jobs, "Stages run at once (local executor)")->capture_default_str();
-  cmd->add_option("--shard", a.shard, "Run only slice I of N of the runs (I/N, 1-based)");
-  cmd->add_option("--out,-o", a.out, "Results folder (default out/experiments; one subfolder per experiment)");
-  cmd->add_option("--cache", a.cache, "Stage cache (default: <out>/cache, shared by the experiments)");
-  cmd->add_option("--executor", a.executor,
+  auto a = std::make_shared<RunArgs>();
+  cmd->add_option("experiment", a->name, "Experiment name (experiments/NAME.yaml), a config file, or all")->required();
+  cmd->add_option("--profile", a->profile,
+                  "quick, paper, or another profile the config defines (e.g. detail-ladder's lights)");
+  cmd->add_option("--seeds", a->seeds, "Independent actor sets (overrides the config)");
+  cmd->add_option("--jobs,-j", a->jobs, "Stages run at once (local executor)")->capture_default_str();
+  cmd->add_option("--shard", a->shard, "Run only slice I of N of the runs (I/N, 1-based)");
+  cmd->add_option("--out,-o", a->out, "Results folder (default out/experiments; one subfolder per experiment)");
+  cmd->add_option("--cache", a->cache, "Stage cache (default: <out>/cache, shared by the experiments)");
+  cmd->add_option("--executor", a->executor,
                   "local (stages run here, --jobs at a time) or slurm (each missing stage a batch job or array task with "
                   "afterok dependencies; the cache and the crease program on a folder every node sees)")
       ->capture_default_str();
-  cmd->add_option("--slurm-args", a.slurm_args,
+  cmd->add_option("--slurm-args", a->slurm_args,
                   "Site options for every sbatch, e.g. \"--partition=short --account=lab --qos=normal\"");
-  cmd->add_option("--slurm-arrays", a.slurm_arrays,
+  cmd->add_option("--slurm-arrays", a->slurm_arrays,
                   "on: alike stages (one kind and resources, the same dependency wave: sweep points × seeds) are "
                   "submitted as one job array; off: one job per stage")
       ->capture_default_str();
-  cmd->add_option("--slurm-poll", a.slurm_poll, "Seconds between the runner's squeue polls (slurm executor)")
+  cmd->add_option("--slurm-poll", a->slurm_poll, "Seconds between the runner's squeue polls (slurm executor)")
       ->capture_default_str();
-  cmd->add_flag("--dry-run", a.dry_run, "Print the runs and the commands of their stages, run nothing");
-  cmd->callback([] { RunExperimentCommand(a); });
+  cmd->add_flag("--dry-run", a->dry_run, "Print the runs and the commands of their stages, run nothing");
+  cmd->callback([a] { RunExperimentCommand(*a); });
 }
 
 void AddStageAndStatusCommands(CLI::App* exp) {
   {
     auto* cmd = exp->add_subcommand("stage", "Make one planned stage from its plan file (what a Slurm job runs)");
-    static std::string plan;
-    cmd->add_option("plan", plan, "The stage's plan.json (cache/<kind>/<key>.slurm/plan.json)")->required();
-    cmd->callback([] {
-      RequireReadableFile(plan);
-      const ExperimentStage stage = StageFromJson(ReadJsonFile(plan), plan);
+    struct Args {
+      std::string plan;
+    };
+    auto a = std::make_shared<Args>();
+    cmd->add_option("plan", a->plan, "The stage's plan.json (cache/<kind>/<key>.slurm/plan.json)")->required();
+    cmd->callback([a] {
+      RequireReadableFile(a->plan);
+      const ExperimentStage stage = StageFromJson(ReadJsonFile(a->plan), a->plan);
       std::printf("%s stage %s: %s\n", stage.kind.c_str(), stage.key.c_str(), ExperimentCommandLine(stage.argv).c_str());
       std::fflush(stdout);
       const std::string error = ExecuteStage(stage, SubprocessExecutor(SelfPath()));
@@ -231,32 +236,39 @@ void AddStageAndStatusCommands(CLI::App* exp) {
   {
     auto* cmd = exp->add_subcommand(
         "status", "What an experiment run with --executor slurm has done, queued, running, failed (cache + squeue)");
-    static std::string out;
-    cmd->add_option("out", out, "The experiment's results folder (e.g. out/experiments/tracking-refinement)")->required();
-    cmd->callback([] {
-      const std::vector<StageStatus> status = ExperimentStageStatus(out, SlurmOptions{});
-      std::printf("%s", FormatStageStatus(fs::path(out).filename().string(), status).c_str());
+    struct Args {
+      std::string out;
+    };
+    auto a = std::make_shared<Args>();
+    cmd->add_option("out", a->out, "The experiment's results folder (e.g. out/experiments/tracking-refinement)")
+        ->required();
+    cmd->callback([a] {
+      const std::vector<StageStatus> status = ExperimentStageStatus(a->out, SlurmOptions{});
+      std::printf("%s", FormatStageStatus(fs::path(a->out).filename().string(), status).c_str());
     });
   }
 }
 
 void AddReportCommand(CLI::App& app) {
   auto* cmd = app.add_subcommand("report", "Figures and a Markdown report of experiment results (reports/)");
-  static std::string results, out, markdown, preface;
-  cmd->add_option("results", results, "Results folder (one experiment, or a folder of experiments)")->required();
-  cmd->add_option("--out,-o", out, "Report folder (default: the results folder)");
-  cmd->add_option("--markdown", markdown,
+  struct Args {
+    std::string results, out, markdown, preface;
+  };
+  auto a = std::make_shared<Args>();
+  cmd->add_option("results", a->results, "Results folder (one experiment, or a folder of experiments)")->required();
+  cmd->add_option("--out,-o", a->out, "Report folder (default: the results folder)");
+  cmd->add_option("--markdown", a->markdown,
                   "The report's Markdown file (default OUT/report.md; figure links relative to it)");
-  cmd->add_option("--preface", preface, "Markdown put after the report's introduction (how it was made, caveats)");
-  cmd->callback([] {
+  cmd->add_option("--preface", a->preface, "Markdown put after the report's introduction (how it was made, caveats)");
+  cmd->callback([a] {
     const fs::path script = SourceDir() / "reports" / "make_report.py";
     RequireReadableFile(script);
-    std::vector<std::string> args = {"/usr/bin/python3", script.string(), results};
-    if (!out.empty()) args.insert(args.end(), {"-o", out});
-    if (!markdown.empty()) args.insert(args.end(), {"--markdown", markdown});
-    if (!preface.empty()) args.insert(args.end(), {"--preface", preface});
+    std::vector<std::string> args = {"/usr/bin/python3", script.string(), a->results};
+    if (!a->out.empty()) args.insert(args.end(), {"-o", a->out});
+    if (!a->markdown.empty()) args.insert(args.end(), {"--markdown", a->markdown});
+    if (!a->preface.empty()) args.insert(args.end(), {"--preface", a->preface});
     std::vector<char*> cargs;
-    for (auto& a : args) cargs.push_back(a.data());
+    for (auto& arg : args) cargs.push_back(arg.data());
     cargs.push_back(nullptr);
     std::fflush(stdout);
     execv(cargs[0], cargs.data());

@@ -2,6 +2,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
@@ -78,20 +79,23 @@ void AddMeshCommands(CLI::App& app) {
   // mesh info
   {
     auto* cmd = mesh->add_subcommand("info", "Print a mesh's size, bounds, topology and fields; validates it");
-    static std::string file;
-    static bool as_json = false;
-    cmd->add_option("FILE", file, "Mesh file (.ply, .obj, .vtp)")->required();
-    cmd->add_flag("--json", as_json, "Print JSON instead of text");
-    cmd->callback([] {
+    struct Args {
+      std::string file;
+      bool as_json = false;
+    };
+    auto a = std::make_shared<Args>();
+    cmd->add_option("FILE", a->file, "Mesh file (.ply, .obj, .vtp)")->required();
+    cmd->add_flag("--json", a->as_json, "Print JSON instead of text");
+    cmd->callback([a] {
       std::vector<VertexField> fields;
-      const TriMesh m = ReadMeshFile(file, &fields);
-      ValidateMesh(m, file);
-      const nlohmann::json j = MeshInfo(file, m, fields);
-      if (as_json) {
+      const TriMesh m = ReadMeshFile(a->file, &fields);
+      ValidateMesh(m, a->file);
+      const nlohmann::json j = MeshInfo(a->file, m, fields);
+      if (a->as_json) {
         std::printf("%s\n", j.dump(2).c_str());
         return;
       }
-      std::printf("%s\n", file.c_str());
+      std::printf("%s\n", a->file.c_str());
       std::printf("  vertices           %d\n", m.num_vertices());
       std::printf("  triangles          %d\n", m.num_faces());
       std::printf("  uv                 %s\n", m.has_uv() ? "yes" : "no");
@@ -112,65 +116,72 @@ void AddMeshCommands(CLI::App& app) {
   // mesh convert
   {
     auto* cmd = mesh->add_subcommand("convert", "Convert between PLY, OBJ and VTP (VTP fields are kept VTP to VTP)");
-    static std::string in, out;
-    static bool ascii = false, single = false, normals = false;
-    cmd->add_option("IN", in, "Input mesh (.ply, .obj, .vtp)")->required();
-    cmd->add_option("OUT", out, "Output mesh (.ply, .obj, .vtp)")->required();
-    cmd->add_flag("--ascii", ascii, "ASCII PLY / VTP instead of binary");
-    cmd->add_flag("--float", single, "PLY: 32-bit float coordinates instead of 64-bit");
-    cmd->add_flag("--normals", normals, "Compute area-weighted vertex normals and write them");
-    cmd->callback([] {
+    struct Args {
+      std::string in, out;
+      bool ascii = false, single = false, normals = false;
+    };
+    auto a = std::make_shared<Args>();
+    cmd->add_option("IN", a->in, "Input mesh (.ply, .obj, .vtp)")->required();
+    cmd->add_option("OUT", a->out, "Output mesh (.ply, .obj, .vtp)")->required();
+    cmd->add_flag("--ascii", a->ascii, "ASCII PLY / VTP instead of binary");
+    cmd->add_flag("--float", a->single, "PLY: 32-bit float coordinates instead of 64-bit");
+    cmd->add_flag("--normals", a->normals, "Compute area-weighted vertex normals and write them");
+    cmd->callback([a] {
       std::vector<VertexField> fields;
-      TriMesh m = ReadMeshFile(in, &fields);
-      ValidateMesh(m, in);
-      if (normals) m.N = VertexNormals(m);
-      WriteMeshFile(out, m, ascii, single, fields);
-      std::printf("wrote %s (%d vertices, %d triangles)\n", out.c_str(), m.num_vertices(), m.num_faces());
+      TriMesh m = ReadMeshFile(a->in, &fields);
+      ValidateMesh(m, a->in);
+      if (a->normals) m.N = VertexNormals(m);
+      WriteMeshFile(a->out, m, a->ascii, a->single, fields);
+      std::printf("wrote %s (%d vertices, %d triangles)\n", a->out.c_str(), m.num_vertices(), m.num_faces());
     });
   }
 
   // mesh render
   {
     auto* cmd = mesh->add_subcommand("render", "Ray-trace a shaded preview image of a mesh (Embree)");
-    static std::string in, out, field;
-    static PreviewRenderOptions opt;
-    static bool no_shadows = false, diverging = false;
-    static std::vector<double> range;
-    cmd->add_option("FILE", in, "Mesh (.ply, .obj, .vtp)")->required();
-    cmd->add_option("--out,-o", out, "Output image (.png, .exr, .jpg)")->required();
-    cmd->add_option("--width", opt.width, "Image width (pixels)")->capture_default_str();
-    cmd->add_option("--height", opt.height, "Image height (pixels)")->capture_default_str();
-    cmd->add_option("--fov", opt.fov_deg, "Horizontal field of view (degrees)")->capture_default_str();
-    cmd->add_option("--azimuth", opt.azimuth_deg, "Camera orbit about +y (degrees)")->capture_default_str();
-    cmd->add_option("--elevation", opt.elevation_deg, "Camera orbit upwards (degrees)")->capture_default_str();
-    cmd->add_flag("--no-shadows", no_shadows, "Do not trace shadow rays");
-    cmd->add_option("--field", field, "VTP input: colour by this per-vertex scalar field (or vector magnitude)");
-    cmd->add_option("--range", range, "Colour range LO HI for --field (default: the field's min and max)")->expected(2);
-    cmd->add_flag("--diverging", diverging, "Use a blue-white-red map for --field (signed data)");
-    cmd->callback([] {
-      opt.shadows = !no_shadows;
+    struct Args {
+      std::string in, out, field;
+      PreviewRenderOptions opt;
+      bool no_shadows = false, diverging = false;
+      std::vector<double> range;
+    };
+    auto a = std::make_shared<Args>();
+    cmd->add_option("FILE", a->in, "Mesh (.ply, .obj, .vtp)")->required();
+    cmd->add_option("--out,-o", a->out, "Output image (.png, .exr, .jpg)")->required();
+    cmd->add_option("--width", a->opt.width, "Image width (pixels)")->capture_default_str();
+    cmd->add_option("--height", a->opt.height, "Image height (pixels)")->capture_default_str();
+    cmd->add_option("--fov", a->opt.fov_deg, "Horizontal field of view (degrees)")->capture_default_str();
+    cmd->add_option("--azimuth", a->opt.azimuth_deg, "Camera orbit about +y (degrees)")->capture_default_str();
+    cmd->add_option("--elevation", a->opt.elevation_deg, "Camera orbit upwards (degrees)")->capture_default_str();
+    cmd->add_flag("--no-shadows", a->no_shadows, "Do not trace shadow rays");
+    cmd->add_option("--field", a->field, "VTP input: colour by this per-vertex scalar field (or vector magnitude)");
+    cmd->add_option("--range", a->range, "Colour range LO HI for --field (default: the field's min and max)")
+        ->expected(2);
+    cmd->add_flag("--diverging", a->diverging, "Use a blue-white-red map for --field (signed data)");
+    cmd->callback([a] {
+      a->opt.shadows = !a->no_shadows;
       std::vector<VertexField> fields;
-      const TriMesh m = ReadMeshFile(in, &fields);
+      const TriMesh m = ReadMeshFile(a->in, &fields);
       MatX3d colors;
-      if (!field.empty()) {
+      if (!a->field.empty()) {
         const VertexField* f = nullptr;
-        for (const auto& x : fields) f = x.name == field ? &x : f;
-        if (!f) throw Error(fmt::format("{}: has no per-vertex field '{}'", in, field));
+        for (const auto& x : fields) f = x.name == a->field ? &x : f;
+        if (!f) throw Error(fmt::format("{}: has no per-vertex field '{}'", a->in, a->field));
         const Eigen::VectorXd s = f->values.cols() == 1 ? Eigen::VectorXd(f->values.col(0))
                                                         : Eigen::VectorXd(f->values.rowwise().norm());
-        const double lo = range.size() == 2 ? range[0] : s.minCoeff();
-        const double hi = range.size() == 2 ? range[1] : s.maxCoeff();
-        colors = ScalarToColors(s, lo, hi, diverging);
+        const double lo = a->range.size() == 2 ? a->range[0] : s.minCoeff();
+        const double hi = a->range.size() == 2 ? a->range[1] : s.maxCoeff();
+        colors = ScalarToColors(s, lo, hi, a->diverging);
       }
       TimingReport timing;
       PreviewRender r;
       {
         ScopedTimer t(&timing, "render");
-        r = RenderPreview(m, opt, colors);
+        r = RenderPreview(m, a->opt, colors);
       }
-      WriteImage(out, r.image);
-      std::printf("wrote %s (%dx%d, %d triangles, %.0f ms, %d pixels on the mesh)\n", out.c_str(), opt.width,
-                  opt.height, m.num_faces(), 1e3 * timing.TotalSeconds(), r.covered_pixels);
+      WriteImage(a->out, r.image);
+      std::printf("wrote %s (%dx%d, %d triangles, %.0f ms, %d pixels on the mesh)\n", a->out.c_str(), a->opt.width,
+                  a->opt.height, m.num_faces(), 1e3 * timing.TotalSeconds(), r.covered_pixels);
     });
   }
 }
