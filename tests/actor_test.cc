@@ -4,10 +4,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include <cstdlib>
 #include <cstring>
 #include <filesystem>
-#include <map>
 #include <set>
 
 #include <fmt/format.h>
@@ -16,7 +14,6 @@
 #include "core/error.h"
 #include "core/image_io.h"
 #include "core/mesh_ops.h"
-#include "core/preview_render.h"
 #include "core/rig_import.h"
 #include "core/uv_raster.h"
 #include "synth/procedural_rig.h"
@@ -451,73 +448,6 @@ TEST(Actor, MalformedJsonNamesFileAndField) {
   EXPECT_NE(testing::ErrorOf([&] { ActorModel model(rig, few_read); })
                 .find(few_file.string() + ": the actor has 3 identity coefficients but"),
             std::string::npos);
-}
-
-// Looking at the result: writes wrinkle maps and raking-light renders of the
-// hi-res surface when CREASE_ACTOR_PREVIEW_DIR is set (e.g. /tmp/actor_previews).
-void WritePreviews(const FaceRig& rig, const std::string& prefix,
-                   const std::vector<std::pair<std::string, std::vector<std::pair<std::string, double>>>>& poses) {
-  const fs::path dir(std::getenv("CREASE_ACTOR_PREVIEW_DIR"));
-  fs::create_directories(dir);
-  const char* seed_text = std::getenv("CREASE_ACTOR_PREVIEW_SEED");
-  const uint64_t seed = seed_text != nullptr ? std::strtoull(seed_text, nullptr, 10) : 5;
-  ActorOptions opt;
-  opt.age_min = 0.6;
-  opt.static_lines = false;  // the forehead must be smooth at neutral
-  const ActorModel model(rig, GenerateActor(rig, seed, opt));
-  PreviewRenderOptions ro;
-  ro.key_light_dir = {0.0, 1.0, 0.3};
-  ro.azimuth_deg = 0;
-  ro.elevation_deg = 0;
-  ro.width = ro.height = 1600;
-  for (const auto& [name, weights] : poses) {
-    const ActorFrame f = model.Frame(ExpressionWeights(rig, weights));
-    std::printf("%s%s: %d hi-res vertices (grid %d², maps %d²), %d faces, %.3f s\n", prefix.c_str(), name.c_str(),
-                f.hires.num_vertices(), model.layout().resolution, model.layout().map_resolution,
-                f.hires.num_faces(), f.seconds);
-    // Deepest point per wrinkle family (mm).
-    std::map<WrinkleFamily, double> deepest;
-    for (const auto& smp : model.wrinkles().samples()) {
-      double& x = deepest[model.wrinkles().lines()[smp.line].family];
-      x = std::min(x, static_cast<double>(f.expression_displacement.ptr<float>()[smp.texel]));
-    }
-    for (const auto& [family, depth] : deepest) std::printf("  %s %.3f", ToString(family).c_str(), depth);
-    std::printf("\n");
-    cv::Mat d = f.expression_displacement * 1.5 + 0.5;  // 0.33 mm deep = black
-    WriteImage(dir / (prefix + "wrinkles_" + name + ".png"), d, {.srgb = false});
-    const PreviewRender r = RenderPreview(f.hires, ro);
-    WriteImage(dir / (prefix + "render_" + name + ".png"), r.image);
-    // Close-up of the forehead and eyes.
-    WriteImage(dir / (prefix + "closeup_" + name + ".png"), r.image(cv::Rect(400, 250, 800, 600)).clone());
-    // The coarse rig surface, for comparison.
-    PreviewRenderOptions co = ro;
-    co.width = co.height = 800;
-    WriteImage(dir / (prefix + "coarse_" + name + ".png"), RenderPreview(f.coarse, co).image);
-  }
-  WriteImage(dir / (prefix + "albedo.png"), model.skin().albedo);
-  WriteImage(dir / (prefix + "static_shape.png"), model.static_displacement() + 0.5, {.srgb = false});
-  WriteImage(dir / (prefix + "mesoscopic.png"), model.mesoscopic_displacement() * 8.0 + 0.5, {.srgb = false});
-  WriteImage(dir / (prefix + "specular.png"), model.skin().specular * 0.5, {.srgb = false});
-  WriteImage(dir / (prefix + "roughness.png"), model.skin().roughness, {.srgb = false});
-}
-
-TEST(Actor, Previews) {
-  if (std::getenv("CREASE_ACTOR_PREVIEW_DIR") == nullptr) GTEST_SKIP() << "set CREASE_ACTOR_PREVIEW_DIR to write previews";
-  WritePreviews(SampleRig(), "sample_",
-                {{"neutral", {}},
-                 {"brow_raise", {{"browInnerUp", 1.0}}},
-                 {"frown", {{"browDown", 1.0}}},
-                 {"smile", {{"mouthSmile_L", 1.0}, {"mouthSmile_R", 1.0}}}});
-}
-
-TEST(Actor, ProceduralRigPreviews) {
-  if (std::getenv("CREASE_ACTOR_PREVIEW_DIR") == nullptr) GTEST_SKIP() << "set CREASE_ACTOR_PREVIEW_DIR to write previews";
-  WritePreviews(BuildProceduralRig(), "procedural_",
-                {{"neutral", {}},
-                 {"brow_raise", {{"browInnerUp_L", 1.0}, {"browInnerUp_R", 1.0}, {"browOuterUp_L", 1.0}, {"browOuterUp_R", 1.0}}},
-                 {"frown", {{"browDown_L", 1.0}, {"browDown_R", 1.0}}},
-                 {"smile", {{"mouthSmile_L", 1.0}, {"mouthSmile_R", 1.0}, {"eyeSquint_L", 0.6}, {"eyeSquint_R", 0.6}, {"cheekSquint_L", 0.6}, {"cheekSquint_R", 0.6}}},
-                 {"sneer", {{"noseSneer_L", 1.0}, {"noseSneer_R", 1.0}}}});
 }
 
 }  // namespace

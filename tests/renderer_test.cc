@@ -716,45 +716,5 @@ TEST(Renderer, MotionBlurAveragesSubframes) {
   EXPECT_ERROR_HAS(RenderMotionBlurred(renderer, open, close, 0, rig, RenderOptions{}, rng), "subframes");
 }
 
-// Not a check: writes previews of a sphere and a bumpy sphere under every rig to
-// /tmp/render_previews/ (run with --gtest_also_run_disabled_tests).
-TEST(Renderer, DISABLED_WritePreviews) {
-  const std::filesystem::path dir = "/tmp/render_previews";
-  std::filesystem::create_directories(dir);
-  TriMesh smooth = MakeUVSphere(80.0, 256, 512);
-  TriMesh bumpy = smooth;
-  const MatX3d n = smooth.V / 80.0;
-  for (int i = 0; i < bumpy.num_vertices(); ++i) {
-    const double bump = 1.5 * std::sin(23.0 * n(i, 0)) * std::cos(19.0 * n(i, 1)) * std::sin(17.0 * n(i, 2)) +
-                        0.3 * std::sin(120.0 * n(i, 1));
-    bumpy.V.row(i) = (80.0 + bump) * n.row(i);
-  }
-  cv::Mat albedo(256, 256, CV_32FC3);
-  for (int y = 0; y < 256; ++y) {
-    for (int x = 0; x < 256; ++x) {
-      const float t = 0.5f + 0.5f * std::sin(x * 0.1f) * std::sin(y * 0.1f);
-      albedo.at<cv::Vec3f>(y, x) = cv::Vec3f(0.55f + 0.1f * t, 0.38f + 0.05f * t, 0.30f);
-    }
-  }
-  SceneMaterials m;
-  m.albedo = albedo;
-  for (const auto& [name, mesh] : {std::pair<std::string, const TriMesh*>{"sphere", &smooth}, {"bumpy", &bumpy}}) {
-    Renderer renderer(*mesh, m);
-    const Camera cam = FrontCamera(320, 240, 450.0);
-    for (const auto& rig_name : LightRigNames()) {
-      RenderOptions options;
-      options.samples_per_axis = 2;
-      options.subsurface_mm = 1.0;
-      options.background = {0.05, 0.05, 0.06};
-      Rng rng(1);
-      const RenderResult r = renderer.Render(cam, MakeLightRig(rig_name), options, rng);
-      SensorOptions so;
-      Rng srng(2);
-      const SensorImage s = ApplySensor(r.image, so, srng);
-      WriteImage(dir / (name + "_" + rig_name + ".png"), s.srgb8, ImageWriteOptions{.srgb = false});
-    }
-  }
-}
-
 }  // namespace
 }  // namespace crease
