@@ -28,14 +28,23 @@ DetailTruth::DetailTruth(const FaceRig& rig, const Actor& actor, const DetailExt
   const int R = actor.options.resolution;
   raster_ = RasterizeUv(personal.neutral, R, R, "detail truth: the rig's face chart");
   neutral_wrinkles_ = model_.Frame(Eigen::VectorXd::Zero(personal.num_expressions()), false).expression_displacement;
+  if (detail.lowpass_bandwidth_mm > 0.0) {
+    lowpass_texels_ = detail.lowpass_bandwidth_mm / std::max(MmPerTexel(personal.neutral, R), 1e-9);
+    chart_band_ = MakeWrinkleBandMask(CoverageMask(raster_), lowpass_texels_);
+  }
   Require(neutral_wrinkles_.rows == R && neutral_wrinkles_.cols == R,
           fmt::format("detail truth: the actor's wrinkle map is {}×{}, expected {}×{}", neutral_wrinkles_.cols,
                       neutral_wrinkles_.rows, R, R));
 }
 
-cv::Mat DetailTruth::Wrinkles(const Eigen::VectorXd& expression) const {
+cv::Mat DetailTruth::WrinkleLayer(const Eigen::VectorXd& expression) const {
   const Eigen::VectorXd w = ZeroPadded(expression, model_.rig().num_expressions());
   return model_.Frame(w, false).expression_displacement - neutral_wrinkles_;
+}
+
+cv::Mat DetailTruth::Wrinkles(const Eigen::VectorXd& expression) const {
+  const cv::Mat layer = WrinkleLayer(expression);
+  return lowpass_texels_ > 0.0 ? WrinkleBand(layer, chart_band_) : layer;
 }
 
 cv::Mat DetailTruth::CoarseBand(const Eigen::VectorXd& expression) const {

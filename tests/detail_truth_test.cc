@@ -91,5 +91,31 @@ TEST(DetailTruth, ExtractionOfAStudioScanMatchesTheTruth) {
   EXPECT_LT(amplitude, 1.5);
 }
 
+// D^j holds a groove less its own blur by G (G(M^j) carries the blur into M_0^j),
+// so the truth's wrinkles are the layer less its blur: a broad, shallow part of
+// the layer, which the extraction cannot return, is left out.
+TEST(DetailTruth, WrinklesLoseTheirOwnLowFrequencies) {
+  const FaceRig& rig = StudioHead();
+  const int R = 256;
+  ActorOptions o;
+  o.resolution = R;
+  o.surface_min_vertices = 40000;
+  o.age_min = o.age_max = 1.0;  // deep lines
+  const Actor actor = GenerateActor(rig, 5, o);
+  DetailExtractionOptions g;
+  g.map_resolution = R;
+  const DetailTruth truth(rig, actor, g);
+  const Eigen::VectorXd raise = ParseExpressionSpec("browInnerUp=1,browOuterUp=1", rig);
+  const cv::Mat layer = truth.WrinkleLayer(raise), wrinkles = truth.Wrinkles(raise);
+  ASSERT_GT(AbsMax(layer), 0.1);  // mm: a lined actor's forehead under a brow raise
+  const cv::Mat low = layer - wrinkles;  // G of the layer
+  EXPECT_GT(cv::norm(low), 0.05 * cv::norm(layer));  // the blur is not nothing …
+  EXPECT_LT(AbsMax(low), 0.5 * AbsMax(layer));      // … but broad and shallow
+  // Without a lowpass the layer is left as it is.
+  DetailExtractionOptions none = g;
+  none.lowpass_bandwidth_mm = 0.0;
+  EXPECT_EQ(cv::norm(DetailTruth(rig, actor, none).Wrinkles(raise) - layer), 0.0);
+}
+
 }  // namespace
 }  // namespace crease
