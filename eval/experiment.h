@@ -25,7 +25,7 @@
 //   rig / actor / test_actor / scans_studio / studio / training / tracker / capture / eval:
 //                                      options of the stage by field name (the structs of
 //                                      synth/procedural_rig.h, synth/actor.h, synth/studio.h,
-//                                      pipeline/training/trainer.h, eval/tracker_training.h,
+//                                      pipeline/training/trainer.h, pipeline/capture/tracker_training.h,
 //                                      pipeline/capture/capture.h, eval/capture_metrics.h)
 //   sweep: {mode: none|list|grid, values: {section.field: [v, …], …}}
 //       list: each key on its own, the others at their base value (a one-at-a-time

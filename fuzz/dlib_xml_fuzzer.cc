@@ -1,13 +1,14 @@
 // libFuzzer target: a dlib imglab XML landmark file through ReadDlibXmlFaces
-// (eval/tracker_training.h), beside the 8×8 image face.png its seeds name (written
-// once with crease's WriteImage). Small crops (box_px 16) keep executions fast.
+// (pipeline/capture/labelled_faces.h, in crease_capture), beside the 8×8 image face.png
+// its seeds name (written once with crease's WriteImage). Small crops (box_px 16) keep
+// executions fast.
 #include <filesystem>
 
 #include <opencv2/core.hpp>
 
 #include "core/image_io.h"
-#include "eval/tracker_training.h"
 #include "fuzz/fuzz_util.h"
+#include "pipeline/capture/labelled_faces.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static const bool image_written = [] {

@@ -2,58 +2,25 @@
 
 #include <gtest/gtest.h>
 
-#include <cmath>
 #include <fstream>
-#include <numbers>
 
-#include <fmt/format.h>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
+#include <opencv2/core.hpp>
 #include <tbb/global_control.h>
 
 #include "core/ibug.h"
-#include "core/rng.h"
-#include "eval/tracker_training.h"
+#include "eval/tracker_renders.h"
 #include "synth/procedural_rig.h"
 #include "tests/test_util.h"
+#include "tests/toy_faces.h"
 
 namespace crease {
 namespace {
 
 using testing::ErrorOf;
+using testing::MakeToy;
 using testing::TestDir;
-
-// A cheap learnable toy problem (no rendering): 68 points on an ellipse-like
-// contour under a random similarity, drawn as bright dots on a noisy dark image.
-struct Toy {
-  std::vector<cv::Mat> images;
-  std::vector<MatX2d> shapes;
-};
-
-Toy MakeToy(int count, uint64_t seed) {
-  Rng rng(seed);
-  MatX2d base(68, 2);
-  for (int i = 0; i < 68; ++i) {
-    const double a = 2 * std::numbers::pi * i / 68.0;
-    base.row(i) << 30 * std::cos(a) + 4 * std::cos(3 * a), 36 * std::sin(a) + 3 * std::sin(2 * a);
-  }
-  Toy toy;
-  for (int k = 0; k < count; ++k) {
-    const double s = std::exp(rng.Normal(0, 0.08)), ang = rng.Normal(0, 0.1);
-    const double cx = 60 + rng.Normal(0, 5), cy = 60 + rng.Normal(0, 5);
-    MatX2d shape(68, 2);
-    for (int i = 0; i < 68; ++i) {
-      const double x = base(i, 0) + rng.Normal(0, 1.5), y = base(i, 1) + rng.Normal(0, 1.5);
-      shape.row(i) << cx + s * (std::cos(ang) * x - std::sin(ang) * y), cy + s * (std::sin(ang) * x + std::cos(ang) * y);
-    }
-    cv::Mat img(120, 120, CV_32FC1);
-    cv::randu(img, 0.0f, 0.15f);
-    for (int i = 0; i < 68; ++i) cv::circle(img, cv::Point2d(shape(i, 0), shape(i, 1)), 2, cv::Scalar(0.9), cv::FILLED);
-    toy.images.push_back(img);
-    toy.shapes.push_back(shape);
-  }
-  return toy;
-}
+using testing::Toy;
+using testing::ToyFaces;
 
 ShapeRegressorOptions TinyOptions() {
   ShapeRegressorOptions o;
@@ -172,103 +139,6 @@ TEST(ShapeRegressor, LandmarkSourceFlagsLostShapes) {
   EXPECT_TRUE(r.detected);
 }
 
-// The toy's images as 8-bit RGB labelled faces named PREFIX0, PREFIX1, …
-std::vector<LabelledFace> ToyFaces(const Toy& toy, const std::string& prefix) {
-  std::vector<LabelledFace> faces(toy.images.size());
-  for (size_t i = 0; i < faces.size(); ++i) {
-    faces[i].name = prefix + std::to_string(i);
-    cv::Mat rgb;
-    cv::cvtColor(toy.images[i], rgb, cv::COLOR_GRAY2RGB);
-    rgb.convertTo(faces[i].image, CV_8UC3, 255.0);
-    faces[i].landmarks = toy.shapes[i];
-  }
-  return faces;
-}
-
-TEST(ShapeRegressor, LabelledFaceFolderRoundTrip) {
-  const Toy toy = MakeToy(2, 7);
-  const std::vector<LabelledFace> faces = ToyFaces(toy, "face");
-  const auto dir = TestDir();
-  WriteLabelledFaces(dir, faces);
-  const std::vector<LabelledFace> back = ReadLabelledFaces(dir);
-  ASSERT_EQ(back.size(), 2u);
-  for (int i = 0; i < 2; ++i) {
-    EXPECT_EQ(back[i].name, faces[i].name);
-    EXPECT_EQ(cv::norm(back[i].image, faces[i].image, cv::NORM_INF), 0.0);
-    EXPECT_LT((back[i].landmarks - faces[i].landmarks).cwiseAbs().maxCoeff(), 1e-4);
-  }
-  testing::WriteText(dir / "face1.pts", "version: 1\nn_points: 68\n{\n1 2\n}\n");
-  EXPECT_NE(ErrorOf([&] { ReadLabelledFaces(dir); }).find("face1.pts: point 2"), std::string::npos);
-}
-
-// dlib's imglab XML (its 300-W release and example faces): each labelled box becomes
-// a crop of known scale whose pixels and landmarks agree; ignored and incomplete
-// boxes are skipped; errors name the file and line.
-TEST(ShapeRegressor, DlibXmlFacesAreCroppedAroundTheirBoxes) {
-  const auto dir = TestDir();
-  // A 300×200 image with a bright dot at every part of a face in the box
-  // (left 100, top 50, 80×80): a ring of 68 points.
-  cv::Mat image(200, 300, CV_8UC3, cv::Scalar::all(0));
-  std::string parts;
-  MatX2d truth(68, 2);
-  for (int k = 0; k < 68; ++k) {
-    const double a = 2.0 * std::numbers::pi * k / 68.0;
-    const int x = static_cast<int>(std::lround(140 + 30 * std::cos(a))), y = static_cast<int>(std::lround(90 + 30 * std::sin(a)));
-    truth.row(k) << x, y;
-    image.at<cv::Vec3b>(y, x) = cv::Vec3b(255, 255, 255);
-    parts += fmt::format("      <part name='{:02d}' x='{}' y='{}'/>\n", k, x, y);
-  }
-  cv::Mat bgr;
-  cv::cvtColor(image, bgr, cv::COLOR_RGB2BGR);
-  ASSERT_TRUE(cv::imwrite((dir / "photo.png").string(), bgr));
-  const std::string xml = "<?xml version='1.0'?>\n<!-- labels -->\n<dataset><images>\n"
-                          "  <image file='photo.png'>\n"
-                          "    <box top='50' left='100' width='80' height='80'>\n" + parts +
-                          "    </box>\n"
-                          "    <box top='0' left='0' width='20' height='20' ignore='1'>\n" + parts +
-                          "    </box>\n"
-                          "    <box top='0' left='200' width='20' height='20'>\n"
-                          "      <part name='00' x='205' y='5'/>\n"
-                          "    </box>\n"
-                          "  </image>\n</images></dataset>\n";
-  testing::WriteText(dir / "labels.xml", xml);
-  const std::vector<LabelledFace> faces = ReadDlibXmlFaces(dir / "labels.xml", {.crop_scale = 2.0, .box_px = 40});
-  ASSERT_EQ(faces.size(), 1u);
-  const LabelledFace& f = faces[0];
-  EXPECT_EQ(f.name, "photo_0");
-  ASSERT_EQ(f.image.cols, 80);
-  ASSERT_EQ(f.image.rows, 80);
-  // Scale 40 / 80 about the box centre (139.5, 89.5) → the crop centre (39.5, 39.5).
-  for (int k = 0; k < 68; ++k) {
-    EXPECT_NEAR(f.landmarks(k, 0), 0.5 * (truth(k, 0) - 139.5) + 39.5, 1e-9);
-    EXPECT_NEAR(f.landmarks(k, 1), 0.5 * (truth(k, 1) - 89.5) + 39.5, 1e-9);
-    // The dot is at the landmark: the crop is brighter there than at the centre.
-    const int x = static_cast<int>(std::lround(f.landmarks(k, 0))), y = static_cast<int>(std::lround(f.landmarks(k, 1)));
-    EXPECT_GT(f.image.at<cv::Vec3b>(y, x)[0], 20) << k;
-  }
-  EXPECT_EQ(f.image.at<cv::Vec3b>(40, 40)[0], 0);
-  // ReadLabelledFaces takes the XML too (train-tracker --data, eval-landmarks --data).
-  EXPECT_EQ(ReadLabelledFaces(dir / "labels.xml").size(), 1u);
-  // Errors name the file, the line and the problem.
-  testing::WriteText(dir / "bad.xml", "<dataset>\n<image file='photo.png'>\n<box top='x' left='0' width='9' height='9'>\n" +
-                                          parts + "</box></image></dataset>\n");
-  EXPECT_NE(ErrorOf([&] { ReadDlibXmlFaces(dir / "bad.xml"); }).find("bad.xml:3: <box> top='x' is not a number"),
-            std::string::npos);
-  testing::WriteText(dir / "missing.xml", "<image file='nowhere.jpg'><box top='0' left='0' width='9' height='9'>" +
-                                              parts + "</box></image>");
-  EXPECT_NE(ErrorOf([&] { ReadDlibXmlFaces(dir / "missing.xml"); }).find("image 'nowhere.jpg' not found"),
-            std::string::npos);
-  // Issue 19: a box of 1e-300 px scaled the crop to infinite coordinates.
-  testing::WriteText(dir / "tiny.xml", "<image file='photo.png'><box top='0' left='0' width='1e-300' height='1e-300'>" +
-                                           parts + "</box></image>");
-  EXPECT_NE(ErrorOf([&] { ReadDlibXmlFaces(dir / "tiny.xml"); }).find("tiny.xml:1: <box> smaller than 1 px"),
-            std::string::npos);
-  testing::WriteText(dir / "empty.xml", "<dataset><images></images></dataset>");
-  EXPECT_NE(ErrorOf([&] { ReadDlibXmlFaces(dir / "empty.xml"); }).find("no <box> with the 68 <part>s"),
-            std::string::npos);
-  EXPECT_NE(ErrorOf([&] { ReadDlibXmlFaces(dir / "none.xml"); }).find("none.xml: cannot open"), std::string::npos);
-}
-
 // The issue's test: trained on a small set of studio renders, the regressor
 // reduces the landmark error of its initialisation on renders of held-out actors.
 TEST(ShapeRegressor, ReducesErrorOnHeldOutRenders) {
@@ -289,17 +159,17 @@ TEST(ShapeRegressor, ReducesErrorOnHeldOutRenders) {
   const std::vector<LabelledFace> train = RenderLabelledFaces(rig, {11, 12, 13, 14, 15, 16}, o);
   const std::vector<LabelledFace> test = RenderLabelledFaces(rig, {21, 22}, o);
   ASSERT_EQ(train.size(), 96u);
-  const TrackerTrainingResult r = TrainTrackerOnFaces(train, test, o);
+  const TrackerTrainingResult r = TrainAndEvaluateTracker(train, test, o);
   const TrackerTrainingReport& rep = r.report;
   std::printf("%s", rep.ToText().c_str());
-  EXPECT_EQ(rep.tracking.frames, 32);
+  EXPECT_EQ(rep.held_out.tracking.frames, 32);
   // The HOG detector's box is fitted onto the landmark box on the training renders;
   // dlib's box reaches higher (the forehead) than the 68 points do.
-  EXPECT_GT(rep.detector_calibration_faces, 10);
-  EXPECT_GT(rep.detector_box.y(), 0.02);
-  EXPECT_LT(rep.tracking.final_iod, 0.7 * rep.tracking.initial_iod);
-  EXPECT_LT(rep.box.final_iod, 0.8 * rep.box.initial_iod);
-  EXPECT_LT(rep.training.train_error_iod.back(), rep.training.train_error_iod.front());
+  EXPECT_GT(rep.training.detector_calibration_faces, 10);
+  EXPECT_GT(rep.training.detector_box.y(), 0.02);
+  EXPECT_LT(rep.held_out.tracking.final_iod, 0.7 * rep.held_out.tracking.initial_iod);
+  EXPECT_LT(rep.held_out.box.final_iod, 0.8 * rep.held_out.box.initial_iod);
+  EXPECT_LT(rep.training.regressor.train_error_iod.back(), rep.training.regressor.train_error_iod.front());
 }
 
 // Labelled photographs (here two toy faces) join the studio renders for training.

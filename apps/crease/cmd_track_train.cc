@@ -2,7 +2,7 @@
 // pipeline/capture/shape_regressor.h, Cao et al. 2012 explicit shape regression as
 // the landmark stage of the DDE-style tracker) on studio renders generated on the fly
 // or read from a folder, and reports its error on held-out renders
-// (eval/tracker_training.h).
+// (pipeline/capture/tracker_training.h; the renders: eval/tracker_renders.h).
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -15,9 +15,12 @@
 #include "core/file_util.h"
 #include "core/options.h"
 #include "core/json_io.h"
-#include "eval/tracker_training.h"
+#include "eval/tracker_renders.h"
+#include "pipeline/capture/labelled_faces.h"
+#include "pipeline/capture/landmark_evaluation.h"
 #include "pipeline/capture/landmarks.h"
 #include "pipeline/capture/shape_regressor.h"
+#include "pipeline/capture/tracker_training.h"
 
 namespace crease::app {
 namespace fs = std::filesystem;
@@ -49,7 +52,7 @@ void AddTrainTrackerCommand(CLI::App& app) {
   cmd->add_option("--size", a->size, "Image size WIDTHxHEIGHT (default 320x240)");
   cmd->add_option("--seed", a->seed, "Seed of actors, renders, augmentation and features")->capture_default_str();
   cmd->add_option("--config", a->config,
-                  "Options (YAML; keys: eval/tracker_training.h TrackerTrainingOptions and "
+                  "Options (YAML; keys: pipeline/capture/tracker_training.h TrackerTrainingOptions and "
                   "pipeline/capture/shape_regressor.h ShapeRegressorOptions)");
   cmd->add_option("--set", a->sets,
                   "Option KEY=VALUE (repeatable), e.g. regressor.num_stages=6 regressor.num_ferns=50 "
@@ -96,7 +99,7 @@ void AddTrainTrackerCommand(CLI::App& app) {
       result = TrainTrackerOnRenders(rig, options, a->save_data, extra);
     }
     if (!a->sequence.empty()) {
-      EvaluateSequenceTracking(result.regressor, ReadLabelledFaces(a->sequence), &result.report);
+      result.report.sequence = EvaluateSequenceTracking(result.regressor, ReadLabelledFaces(a->sequence));
     }
     SaveShapeRegressor(a->out, result.regressor);
     const fs::path out_path(a->out);
@@ -159,8 +162,7 @@ void AddEvalLandmarksCommand(CLI::App& app) {
       report(EvaluateLandmarkSource(source, faces));
       // Without the detector: from the truth under a random similarity (a a->tracker's
       // previous frame) and from the mean shape in the truth's jittered box.
-      TrackerTrainingReport r;
-      EvaluateShapeRegressor(regressor, faces, a->seed, /*detector_frames=*/0, &r);
+      const ShapeRegressorEvaluation r = EvaluateShapeRegressor(regressor, faces, a->seed, /*detector_frames=*/0);
       std::printf("regressor  from the perturbed truth: %.3f -> %.3f IOD (%.2f -> %.2f px); from a jittered box: "
                   "%.3f -> %.3f IOD (%.2f -> %.2f px)\n",
                   r.tracking.initial_iod, r.tracking.final_iod, r.tracking.initial_px, r.tracking.final_px,
