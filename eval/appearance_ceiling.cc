@@ -67,7 +67,7 @@ void AppearanceCeilingMeter::Add(int frame, const cv::Mat& texture, const std::v
             fmt::format("appearance ceiling, frame {}: a target must be CV_32F {}×{}", frame, R, R));
   }
   // r = T / T_ref − 1 where both are seen, clamped, blurred to the window's spacing.
-  cv::Mat r = FlattenByReference(texture, reference_, cv::Mat(), "ratio", 1.0);
+  cv::Mat r = FlattenByReference(texture, reference_, cv::Mat(), TextureReference::kRatio, 1.0);
   cv::Mat seen = r > 0;
   cv::subtract(r, 1.0, r, seen);
   r = cv::max(r, -1.0);

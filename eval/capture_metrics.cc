@@ -386,7 +386,7 @@ FlowStageErrors PoolFlowStages(const std::vector<FrameCaptureEval>& frames, int*
 // Accumulates LkFromTruth over the frames of a capture.
 class LkFromTruthMeter {
  public:
-  // `capture_options`: the capture's refinement options (capture.json: CaptureOptionsOf).
+  // `capture_options`: the capture's refinement options (capture.json: CaptureOptionsOfJson).
   explicit LkFromTruthMeter(const FlowRefinementOptions& capture_options) : lk_(capture_options) {}
   // Frame `index` (8-bit gray) with its truth; `flow_vertex`: the capture's flow points.
   void Add(int index, const cv::Mat& gray8, const FrameTruth& truth, const std::vector<int>& flow_vertex) {
@@ -452,27 +452,10 @@ cv::Mat ReadRgbFrame(const fs::path& path, bool linear) {
   return img;
 }
 
-// The capture's options of one stage (T, CaptureOptions' section `section`): the
-// fields of capture.json's "options" that T knows (the rest belong to other
-// stages), its defaults for the others; checked by type, errors name the file.
-template <class T>
-T CaptureOptionsOf(const json& capture_json, const std::string& section, const std::string& what) {
-  const json o = capture_json.value("options", json::object());
-  json known = json::object();
-  for (const std::string& key : OptionFieldNames<T>()) {
-    // CaptureOptions' section (flat in captures from before option sections).
-    const std::string stored = o.contains(section + "." + key) ? section + "." + key : key;
-    if (o.contains(stored)) known[key] = o[stored];
-  }
-  T t;
-  SetOptionsFromJson(known.dump(), what, &t);
-  return t;
-}
-
 // The capture's FrameTextureOptions; the map resolution is the one the capture ran at
 // (top-level "map_resolution": the model's, which overrides the option).
 FrameTextureOptions CaptureTextureOptions(const json& capture_json, const std::string& what) {
-  FrameTextureOptions t = CaptureOptionsOf<FrameTextureOptions>(capture_json, "texture", what);
+  FrameTextureOptions t = CaptureOptionsOfJson(capture_json, what).texture;
   t.map_resolution = capture_json.value("map_resolution", t.map_resolution);
   return t;
 }
@@ -753,7 +736,7 @@ struct PreviousFrame {
 // What the frame loop accumulates over the frames.
 struct FrameLoopState {
   explicit FrameLoopState(const CaptureEvalContext& c)
-      : lk_meter(CaptureOptionsOf<FlowRefinementOptions>(c.cap, "refinement", (c.capture / "capture.json").string())) {
+      : lk_meter(CaptureOptionsOfJson(c.cap, (c.capture / "capture.json").string()).refinement) {
     if (c.options.appearance.enabled && c.detail_truth) {
       appearance.emplace(c.capture, c.dataset, c.cap, c.rig, c.truth_rig, c.K, c.frames,
                          [&c](int index) { return c.FramePath(index); }, c.info, c.wrinkle_mask,

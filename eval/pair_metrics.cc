@@ -112,7 +112,7 @@ LeaveOneActorOutResult EvaluateLeaveOneActorOut(const TrainingPairs& pairs, cons
     const std::string fold_what = fmt::format("{} without {}", what, fold.actor);
     // The baselines' inputs and targets, as TrainDetailModelFromPairs gives the cascade.
     const Eigen::MatrixXf features =
-        NormalizeTexturePatches(train.texture, ToString(model.cascade.options.fern_texture_normalization));
+        NormalizeTexturePatches(train.texture, model.cascade.options.fern_texture_normalization);
     const Eigen::MatrixXf targets = model.pca.ProjectPatches(train.displacement);
     for (size_t r = 0; r < regressors.size(); ++r) {
       model.baseline = PatchBaseline();

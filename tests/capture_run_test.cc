@@ -268,6 +268,38 @@ TEST(CaptureRun, MalformedTruthPoseAndCaptureJsonNameTheField) {
   EXPECT_EQ(read_with({{"frame_indices", {0, 1}}, {"options", nlohmann::json::object()}}), "");
 }
 
+// capture.json's options as `crease eval` reads them (CaptureOptionsOfJson): the
+// sectioned form capture writes now, and the flat form of captures from before option
+// sections, whose keys are read as their new keys — renamed ones included
+// (refine_expression_prior_weight is now refinement.expression_prior_weight).
+TEST(CaptureRun, CaptureOptionsReadFromSectionedAndFlatCaptureJson) {
+  CaptureOptions o;
+  o.refinement.lk_window = 15;
+  o.refinement.fit_expression_prior_weight = 0.25;
+  o.texture.max_view_angle_deg = 70.0;
+  o.refine = false;
+  const nlohmann::json sectioned = {{"frame_indices", {0}}, {"options", nlohmann::json::parse(OptionsToJson(o))}};
+  const nlohmann::json flat = {{"frame_indices", {0}},
+                               {"options",
+                                {{"lk_window", 15},
+                                 {"refine_expression_prior_weight", 0.25},
+                                 {"max_view_angle_deg", 70.0},
+                                 {"refine", false}}}};
+  for (const nlohmann::json& j : {sectioned, flat}) {
+    const CaptureOptions read = CaptureOptionsOfJson(j, "capture.json");
+    EXPECT_EQ(read.refinement.lk_window, 15);
+    EXPECT_EQ(read.refinement.fit_expression_prior_weight, 0.25);
+    EXPECT_EQ(read.texture.max_view_angle_deg, 70.0);
+    EXPECT_FALSE(read.refine);
+    EXPECT_EQ(read.tracker.fit.fit_max_iterations, CaptureOptions().tracker.fit.fit_max_iterations);
+  }
+  EXPECT_EQ(CaptureOptionsOfJson({{"frame_indices", {0}}}, "capture.json").refinement.lk_window,
+            CaptureOptions().refinement.lk_window);
+  EXPECT_ERROR_HAS(CaptureOptionsOfJson({{"options", {{"lk_window", "wide"}}}}, "old/capture.json"),
+                   "old/capture.json");
+  EXPECT_ERROR_HAS(CaptureOptionsOfJson({{"options", {{"lk_window", 2}}}}, "old/capture.json"), "lk_window = 2");
+}
+
 // Issue 19 (cfr_fuzzer): a .cfr header claiming 2^63 − 1 vertices overflowed 3 × n.
 TEST(CaptureRun, CfrVertexCountIsBounded) {
   const fs::path dir = testing::TestDir();

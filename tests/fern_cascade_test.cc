@@ -80,12 +80,14 @@ TEST(FernCascadeTest, TextureNormalisationCancelsAlbedoAndContrast) {
   for (int i = 0; i < 16; ++i) p[i] = 0.3f + 0.02f * static_cast<float>(i % 4) - 0.05f * static_cast<float>(i == 5);
   for (int i = 0; i < 16; ++i) q[i] = 1.7f * p[i];
   for (int i = 0; i < 16; ++i) r[i] = 0.4f * p[i] + 0.1f;
-  auto normalised = [](std::vector<float> v, const std::string& mode) {
+  auto normalised = [](std::vector<float> v, TextureNormalization mode) {
     NormalizeTexturePatch(v.data(), static_cast<int>(v.size()), mode);
     return v;
   };
-  const auto pg = normalised(p, "gain"), qg = normalised(q, "gain"), rg = normalised(r, "gain");
-  const auto ps = normalised(p, "standardize"), rs = normalised(r, "standardize");
+  const auto pg = normalised(p, TextureNormalization::kGain), qg = normalised(q, TextureNormalization::kGain),
+             rg = normalised(r, TextureNormalization::kGain);
+  const auto ps = normalised(p, TextureNormalization::kStandardize),
+             rs = normalised(r, TextureNormalization::kStandardize);
   double mean = 0, var = 0;
   for (int i = 0; i < 16; ++i) mean += ps[i] / 16.0;
   for (int i = 0; i < 16; ++i) var += (ps[i] - mean) * (ps[i] - mean) / 16.0;
@@ -98,9 +100,8 @@ TEST(FernCascadeTest, TextureNormalisationCancelsAlbedoAndContrast) {
     gain_vs_offset = std::max(gain_vs_offset, static_cast<double>(std::abs(pg[i] - rg[i])));
   }
   EXPECT_GT(gain_vs_offset, 0.01);  // "gain" does not cancel an offset
-  EXPECT_EQ(normalised(p, "none"), p);
-  EXPECT_EQ(normalised(std::vector<float>(16, 0.0f), "gain"), std::vector<float>(16, 0.0f));
-  EXPECT_THROW(normalised(p, "bogus"), Error);
+  EXPECT_EQ(normalised(p, TextureNormalization::kNone), p);
+  EXPECT_EQ(normalised(std::vector<float>(16, 0.0f), TextureNormalization::kGain), std::vector<float>(16, 0.0f));
   FernOptions o;
   EXPECT_THROW(SetOptionsFromJson(R"({"texture_normalization": "bogus"})", "f.json", &o), Error);
 }

@@ -275,18 +275,18 @@ TEST(WrinkleMapTest, FlatteningByAReferenceCancelsAlbedoAndKeepsShading) {
   const cv::Mat T = albedo.mul(shading), ref = albedo.clone();
   cv::Mat coverage(8, 8, CV_8U, cv::Scalar(255));
   coverage.at<uint8_t>(0, 0) = 0;
-  const cv::Mat F = FlattenByReference(T, ref, coverage, "ratio");
+  const cv::Mat F = FlattenByReference(T, ref, coverage, TextureReference::kRatio);
   const double m = cv::mean(ref, coverage)[0];
   EXPECT_EQ(F.at<float>(0, 0), 0.0f);  // outside the coverage
   EXPECT_NEAR(F.at<float>(2, 5), m, 1e-6);
   EXPECT_NEAR(F.at<float>(3, 1), 0.5 * m, 1e-6);
   EXPECT_NEAR(F.at<float>(3, 7), 0.5 * m, 1e-6);
-  EXPECT_NEAR(FlattenByReference(T, ref, coverage, "ratio", 2.0).at<float>(3, 2), 1.0, 1e-6);
+  EXPECT_NEAR(FlattenByReference(T, ref, coverage, TextureReference::kRatio, 2.0).at<float>(3, 2), 1.0, 1e-6);
   // The difference keeps the albedo's scaling of the shadow: T − T_ref + m.
-  const cv::Mat G = FlattenByReference(T, ref, coverage, "difference");
+  const cv::Mat G = FlattenByReference(T, ref, coverage, TextureReference::kDifference);
   EXPECT_NEAR(G.at<float>(2, 5), m, 1e-6);
   EXPECT_NEAR(G.at<float>(3, 7), m - 0.5 * albedo.at<float>(3, 7), 1e-6);
-  EXPECT_THROW(FlattenByReference(T, ref, coverage, "sum"), Error);
+  EXPECT_THROW(FlattenByReference(T, ref, coverage, TextureReference::kNone), Error);
   // The median of the frames that saw each texel.
   std::vector<cv::Mat> frames = {cv::Mat(2, 2, CV_32F, cv::Scalar(1.0f)), cv::Mat(2, 2, CV_32F, cv::Scalar(5.0f)),
                                  cv::Mat(2, 2, CV_32F, cv::Scalar(3.0f))};
@@ -296,7 +296,7 @@ TEST(WrinkleMapTest, FlatteningByAReferenceCancelsAlbedoAndKeepsShading) {
   const cv::Mat med = MedianTexture(frames, seen);
   EXPECT_EQ(med.at<float>(0, 0), 3.0f);
   EXPECT_EQ(med.at<float>(1, 1), 5.0f);  // upper median of {1, 5}
-  EXPECT_THROW(FlattenByReference(T, cv::Mat(4, 4, CV_32F), cv::Mat(), "ratio"), Error);
+  EXPECT_THROW(FlattenByReference(T, cv::Mat(4, 4, CV_32F), cv::Mat(), TextureReference::kRatio), Error);
   EXPECT_THROW(MedianTexture({}, {}), Error);
 }
 

@@ -10,6 +10,7 @@
 #include "core/array_file.h"
 #include "core/error.h"
 #include "core/json_io.h"
+#include "core/options.h"
 
 namespace crease {
 
@@ -149,6 +150,13 @@ nlohmann::json ReadCaptureJson(const std::filesystem::path& path) {
     if (j.contains(key)) Require(j[key].is_number(), field(key) + " must be a number");
   }
   return j;
+}
+
+CaptureOptions CaptureOptionsOfJson(const nlohmann::json& capture_json, const std::string& what) {
+  CaptureOptions options;
+  const auto stored = capture_json.find("options");
+  if (stored != capture_json.end()) SetOptionsFromStoredJson(stored->dump(), what, &options);
+  return options;
 }
 
 }  // namespace crease

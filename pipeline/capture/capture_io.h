@@ -13,6 +13,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <string>
 
 #include <nlohmann/json_fwd.hpp>
 
@@ -52,5 +53,11 @@ CaptureFrameArrays ReadCaptureFrameArrays(const std::filesystem::path& path);
 // timing, the numbers fps, tracking_share and detail_share. Errors name the file and
 // the field.
 nlohmann::json ReadCaptureJson(const std::filesystem::path& path);
+
+// The CaptureOptions a capture ran with: capture.json's "options" (absent: the
+// defaults), read like the options of models and pair files (SetOptionsFromStoredJson):
+// a key from before option sections (flat, e.g. "lk_window" or
+// "refine_expression_prior_weight") is read as its new key. Errors name `what`.
+CaptureOptions CaptureOptionsOfJson(const nlohmann::json& capture_json, const std::string& what);
 
 }  // namespace crease

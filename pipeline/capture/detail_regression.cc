@@ -96,7 +96,7 @@ struct DetailRegressor::Impl {
   // ratio or difference, itself otherwise.
   cv::Mat Input(const cv::Mat& gray, const cv::Mat& seen) const {
     if (!flattens()) return gray.isContinuous() ? gray : gray.clone();
-    return FlattenByReference(gray, reference, SeenChart(seen), ToString(model.wrinkle.texture_reference), reference_mean);
+    return FlattenByReference(gray, reference, SeenChart(seen), model.wrinkle.texture_reference, reference_mean);
   }
   // The chart texels seen in a frame (coverage ∧ seen; empty seen = all).
   cv::Mat SeenChart(const cv::Mat& seen) const {
@@ -317,7 +317,7 @@ void DetailRegressor::FixLayout() {
     for (size_t k = 0; k < m.held_gray.size(); ++k) {
       m.AddToMap(m.held_map[k].empty()
                      ? FlattenByReference(m.held_gray[k], m.reference, m.held_seen[k],
-                                          ToString(m.model.wrinkle.texture_reference), m.reference_mean)
+                                          m.model.wrinkle.texture_reference, m.reference_mean)
                      : m.held_map[k],
                  m.held_seen[k]);
     }

@@ -21,6 +21,7 @@
 #include "core/stats.h"
 #include "core/mesh_ops.h"
 #include "core/options.h"
+#include "pipeline/capture/rig_point_residual.h"
 
 namespace crease {
 
@@ -819,7 +820,8 @@ MatX2d FlowRefiner::Impl::Project(const MatX3d& camera_vertices) const {
 // The 3D fit: projected Levenberg–Marquardt on y = (β, ω, t), ω a left rotation
 // increment re-linearised at every iteration (R ← exp([δω]×) R). Per point k with
 // weight w_k and target ũ_k: r_k = √w_k (π(q) − ũ_k), q = R x_k(β) + t, x_k = base_k + B_k β;
-//   ∂r/∂β = √w J_π R B_k,  ∂r/∂ω = −√w J_π [R x_k]×,  ∂r/∂t = √w J_π.
+//   ∂r/∂β = √w J_π R B_k,  ∂r/∂ω = −√w J_π [R x_k]×,  ∂r/∂t = √w J_π
+// (the residual and Jacobians shared with the landmark fit: rig_point_residual.h).
 LandmarkFrameFit FlowRefiner::Impl::SolveFit(const std::vector<int>& points,
                                              const std::vector<Eigen::Vector2d>& targets,
                                              const std::vector<double>& weights, const Eigen::VectorXd& beta_tracker,
@@ -833,38 +835,27 @@ LandmarkFrameFit FlowRefiner::Impl::SolveFit(const std::vector<int>& points,
 
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> J(2 * m, n);
   Eigen::VectorXd r(2 * m);
-  // Residuals (and Jacobian) at (β, R, t); returns the energy.
+  // Residuals (and Jacobian) at (β, R, t); returns the energy. One point's
+  // projection and Jacobians: rig_point_residual.h, weighted by M = √w_k I.
   auto evaluate = [&](const Eigen::VectorXd& b, const Eigen::Matrix3d& Rm, const Eigen::Vector3d& tv, bool jacobian) {
     double cost = 0.0;
+    RigPointProjection proj;
     for (int k = 0; k < m; ++k) {
-      const int p = points[k];
-      const Eigen::Vector3d x =
-          fit_base.segment<3>(3 * p) +
-          Eigen::Vector3d(fit_B.row(3 * p).dot(b), fit_B.row(3 * p + 1).dot(b), fit_B.row(3 * p + 2).dot(b));
-      const Eigen::Vector3d Rx = Rm * x;
-      const Eigen::Vector3d q = Rx + tv;
+      const RigPointBasis B = fit_B.middleRows<3>(3 * points[k]);
       const double sw = std::sqrt(weights[k]);
-      if (!(q.z() > 1e-6)) {
+      const Eigen::Matrix2d M = sw * Eigen::Matrix2d::Identity();
+      if (!ProjectRigPoint(RigPointInHead(fit_base.segment<3>(3 * points[k]), B, b), Rm, tv, K,
+                           jacobian ? &M : nullptr, &proj)) {
         r.segment<2>(2 * k).setZero();
         if (jacobian) J.middleRows(2 * k, 2).setZero();
         continue;
       }
-      const double iz = 1.0 / q.z();
-      const Eigen::Vector2d pix(K.fx * q.x() * iz + K.cx, K.fy * q.y() * iz + K.cy);
-      r.segment<2>(2 * k) = sw * (pix - targets[k]);
+      r.segment<2>(2 * k) = sw * (proj.pixel - targets[k]);
       cost += r.segment<2>(2 * k).squaredNorm();
       if (!jacobian) continue;
-      Eigen::Matrix<double, 2, 3> Jp;
-      Jp << K.fx * iz, 0.0, -K.fx * q.x() * iz * iz, 0.0, K.fy * iz, -K.fy * q.y() * iz * iz;
-      Jp *= sw;
-      const Eigen::Matrix<double, 2, 3> G = Jp * Rm;
-      // Rows of G · B_k as axpys over the contiguous rows of B_k (vectorised).
-      for (int a = 0; a < 2; ++a) {
-        J.row(2 * k + a).head(E) =
-            G(a, 0) * fit_B.row(3 * p) + G(a, 1) * fit_B.row(3 * p + 1) + G(a, 2) * fit_B.row(3 * p + 2);
-      }
-      J.block<2, 3>(2 * k, E) = -Jp * Skew(Rx);
-      J.block<2, 3>(2 * k, E + 3) = Jp;
+      RigPointExpressionJacobian(proj.d_head, B, J.block(2 * k, 0, 2, E));
+      J.block<2, 3>(2 * k, E) = proj.d_rotation;
+      J.block<2, 3>(2 * k, E + 3) = proj.d_cam;
     }
     cost += lb * b.squaredNorm() + lt * (b - beta_tracker).squaredNorm();
     return cost;
@@ -939,12 +930,12 @@ LandmarkFrameFit FlowRefiner::Impl::SolveFit(const std::vector<int>& points,
   // RMS of the unweighted 2D distances at the solution.
   double se = 0.0;
   int count = 0;
+  RigPointProjection proj;
   for (int k = 0; k < m; ++k) {
     const int p = points[k];
-    const Eigen::Vector3d q = R * (fit_base.segment<3>(3 * p) + fit_B.middleRows(3 * p, 3).lazyProduct(beta)) + t;
-    if (!(q.z() > 1e-6)) continue;
-    const Eigen::Vector2d pix(K.fx * q.x() / q.z() + K.cx, K.fy * q.y() / q.z() + K.cy);
-    se += (pix - targets[k]).squaredNorm();
+    const Eigen::Vector3d x = RigPointInHead(fit_base.segment<3>(3 * p), fit_B.middleRows<3>(3 * p), beta);
+    if (!ProjectRigPoint(x, R, t, K, nullptr, &proj)) continue;
+    se += (proj.pixel - targets[k]).squaredNorm();
     ++count;
   }
   fit.rms_px = count > 0 ? std::sqrt(se / count) : 0.0;
@@ -1173,10 +1164,7 @@ void FlowRefiner::Impl::LaplacianTargets(const LandmarkFrameFit& fit, const MatX
   const Eigen::Matrix3d R = fit.cam_from_head.rotation.toRotationMatrix();
   // w · (back-projection of the target at the fitted depth − fitted), camera x, y.
   auto add = [&](int k, int f, const Eigen::Vector2d& target, double w) {
-    const Eigen::Vector3d x =
-        fit_base.segment<3>(3 * k) + Eigen::Vector3d(fit_B.row(3 * k).dot(fit.expression),
-                                                     fit_B.row(3 * k + 1).dot(fit.expression),
-                                                     fit_B.row(3 * k + 2).dot(fit.expression));
+    const Eigen::Vector3d x = RigPointInHead(fit_base.segment<3>(3 * k), fit_B.middleRows<3>(3 * k), fit.expression);
     const Eigen::Vector3d X = R * x + fit.cam_from_head.translation;
     if (!(X.z() > 1e-6) || !target.allFinite()) return;
     (*bx)[f] += w * ((target.x() - K.cx) * X.z() / K.fx - X.x());

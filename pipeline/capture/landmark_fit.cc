@@ -8,6 +8,7 @@
 
 #include "core/error.h"
 #include "core/options.h"
+#include "pipeline/capture/rig_point_residual.h"
 
 namespace crease {
 
@@ -84,14 +85,14 @@ Eigen::Matrix3d LeftJacobianSO3(const Eigen::Vector3d& w) {
 // Parameter blocks: the frame's y = [β (#E), ω (3), t (3)] in one block (so that the
 // identity batch can eliminate whole frames with a Schur complement), and α (#I) when
 // `identity_rows` is given.
-// Analytic Jacobians: Camera::ProjectWithJacobians gives ∂π/∂x (= J R) and the
-// left-perturbation pose Jacobian (−J [q]×, J) with q = R x + t; our ω rotates
-// about the camera origin without t, so ∂π/∂ω = (−J [q]× + J [t]×) J_l(ω).
+// Analytic Jacobians from rig_point_residual.h (shared with flow refinement's 3D fit),
+// weighted by W: ∂r/∂β = W J_π R B, ∂r/∂α = W J_π R A, ∂r/∂t = W J_π; our ω is not a
+// left increment but R = exp([ω]×) R_ref, so ∂r/∂ω = −W J_π [R x]× J_l(ω).
 class LandmarkCost final : public ceres::CostFunction {
  public:
-  LandmarkCost(const Eigen::Vector3d& base, const Eigen::MatrixXd& expression_rows,
-               const Eigen::MatrixXd* identity_rows, const CameraIntrinsics& intrinsics, const Eigen::Matrix3d& R_ref,
-               const Eigen::Vector2d& target, const Eigen::Matrix2d& W)
+  LandmarkCost(const Eigen::Vector3d& base, const RigPointRows& expression_rows, const Eigen::MatrixXd* identity_rows,
+               const CameraIntrinsics& intrinsics, const Eigen::Matrix3d& R_ref, const Eigen::Vector2d& target,
+               const Eigen::Matrix2d& W)
       : base_(base), B_(expression_rows), A_(identity_rows), K_(intrinsics), R_ref_(R_ref), target_(target), W_(W) {
     set_num_residuals(2);
     mutable_parameter_block_sizes()->push_back(static_cast<int>(B_.cols()) + 6);
@@ -100,45 +101,37 @@ class LandmarkCost final : public ceres::CostFunction {
 
   bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
     const Eigen::Index E = B_.cols();
-    const double* beta = p[0];
-    const double* omega = p[0] + E;
-    const double* translation = p[0] + E + 3;
+    const Eigen::Map<const Eigen::VectorXd> beta(p[0], E);
+    const Eigen::Vector3d w(p[0][E], p[0][E + 1], p[0][E + 2]);
+    const Eigen::Vector3d t(p[0][E + 3], p[0][E + 4], p[0][E + 5]);
+    Eigen::Vector3d base = base_;
     // lazyProduct: coefficient-wise products; Eigen's GEMM path costs more at these sizes.
-    Eigen::Vector3d x = base_ + B_.lazyProduct(Eigen::Map<const Eigen::VectorXd>(beta, E));
-    if (A_) x += A_->lazyProduct(Eigen::Map<const Eigen::VectorXd>(p[1], A_->cols()));
-    const Eigen::Vector3d w(omega[0], omega[1], omega[2]);
-    const Eigen::Vector3d t(translation[0], translation[1], translation[2]);
-    const Camera camera(K_, Rigid3d(Eigen::Quaterniond(ExpSO3(w) * R_ref_), t));
-    Eigen::Vector2d pixel;
-    Eigen::Matrix<double, 2, 3> d_pixel_d_point;
-    Eigen::Matrix<double, 2, 6> d_pixel_d_pose;
-    if (!camera.ProjectWithJacobians(x, &pixel, &d_pixel_d_point, &d_pixel_d_pose)) return false;
+    if (A_) base += A_->lazyProduct(Eigen::Map<const Eigen::VectorXd>(p[1], A_->cols()));
+    RigPointProjection proj;
+    if (!ProjectRigPoint(RigPointInHead(base, B_, beta), ExpSO3(w) * R_ref_, t, K_, &W_, &proj)) return false;
     Eigen::Map<Eigen::Vector2d> r(residuals);
-    r = W_ * (pixel - target_);
+    r = W_ * (proj.pixel - target_);
     if (!jacobians) return true;
-    const Eigen::Matrix<double, 2, 3> WJx = W_ * d_pixel_d_point;
     if (jacobians[0]) {
       // Row-major 2 × (#E + 6): columns β, then ω, then t.
       using Strided = Eigen::Map<Eigen::Matrix<double, 2, Eigen::Dynamic, Eigen::RowMajor>, 0, Eigen::OuterStride<>>;
       const Eigen::OuterStride<> stride(E + 6);
-      Strided J_beta(jacobians[0], 2, E, stride);
-      J_beta = WJx.lazyProduct(B_);
-      const Eigen::Matrix<double, 2, 3> J_t = d_pixel_d_pose.rightCols<3>();
+      RigPointExpressionJacobian(proj.d_head, B_, Strided(jacobians[0], 2, E, stride));
       Strided J_omega(jacobians[0] + E, 2, 3, stride);
-      J_omega = W_ * (d_pixel_d_pose.leftCols<3>() + J_t * Skew(t)) * LeftJacobianSO3(w);
+      J_omega = proj.d_rotation * LeftJacobianSO3(w);
       Strided J_translation(jacobians[0] + E + 3, 2, 3, stride);
-      J_translation = W_ * J_t;
+      J_translation = proj.d_cam;
     }
     if (A_ && jacobians[1]) {
       Eigen::Map<Eigen::Matrix<double, 2, Eigen::Dynamic, Eigen::RowMajor>> J_alpha(jacobians[1], 2, A_->cols());
-      J_alpha = WJx.lazyProduct(*A_);
+      J_alpha = proj.d_head.lazyProduct(*A_);
     }
     return true;
   }
 
  private:
   Eigen::Vector3d base_;
-  const Eigen::MatrixXd& B_;
+  const RigPointRows& B_;
   const Eigen::MatrixXd* A_;
   CameraIntrinsics K_;
   Eigen::Matrix3d R_ref_;

@@ -23,9 +23,10 @@
 // Solve (fast path, one Ceres problem per frame): R is parametrised as
 // exp([ω]×) · R_ref with ω ∈ R³ (an angle-axis increment, radians) about the warm
 // start R_ref (the previous frame's rotation), t ∈ R³ (mm); β has Ceres box bounds
-// [0, 1]. Jacobians are analytic: ∂pixel/∂point and ∂pixel/∂pose from
-// Camera::ProjectWithJacobians, chained with the 68 landmark vertices' precomputed
-// basis rows (3×#E, 3×#I each) and the left Jacobian of SO(3) for ω; Levenberg–
+// [0, 1]. Jacobians are analytic: one rig point's projection and Jacobians from
+// rig_point_residual.h (shared with flow refinement's 3D fit), with the 68 landmark
+// vertices' precomputed basis rows (3×#E, 3×#I each) and the left Jacobian of SO(3)
+// for ω; Levenberg–
 // Marquardt with dense normal equations, a few iterations from the previous frame
 // (~0.9 ms per frame on one core at 68 points and 49 expressions,
 // bench/landmark_fit_bench.cc). The first frame, and the first after Reset(), starts
@@ -82,6 +83,7 @@
 #include "core/face_rig.h"
 #include "core/rng.h"
 #include "core/types.h"
+#include "pipeline/capture/rig_point_residual.h"
 
 namespace crease {
 
@@ -226,7 +228,7 @@ class LandmarkRigFitter {
   std::vector<int> vertex_;            // 68 rig vertex ids
   Eigen::Matrix3Xd neutral_;           // 3×68 n_i
   Eigen::Matrix3Xd base_;              // 3×68 n_i + A_i α
-  std::vector<Eigen::MatrixXd> expr_rows_;      // per landmark, B_i (3×#E)
+  std::vector<RigPointRows> expr_rows_;         // per landmark, B_i (3×#E)
   std::vector<Eigen::MatrixXd> identity_rows_;  // per landmark, A_i (3×#I)
   Eigen::VectorXd identity_;
   bool identity_fixed_ = false;

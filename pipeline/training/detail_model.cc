@@ -41,8 +41,8 @@ void DetailModel::Validate(const std::string& what) const {
 
 void DetailModel::RegressBatch(float* patches, int N, float* c) const {
   const int n = pca.patch_pixels();
-  const std::string mode = ToString(cascade.options.fern_texture_normalization);
-  if (mode != "none") {
+  const TextureNormalization mode = cascade.options.fern_texture_normalization;
+  if (mode != TextureNormalization::kNone) {
     for (int i = 0; i < N; ++i) NormalizeTexturePatch(patches + static_cast<size_t>(i) * n, n, mode);
   }
   if (baseline.empty()) {

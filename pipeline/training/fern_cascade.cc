@@ -917,19 +917,17 @@ void FernCascade::Check(const std::string& what) const {
                         i / (static_cast<size_t>(num_bins()) * dimensions)));
 }
 
-void NormalizeTexturePatch(float* patch, int n, const std::string& mode) {
-  if (mode == "none" || n <= 0) return;
+void NormalizeTexturePatch(float* patch, int n, TextureNormalization mode) {
+  if (mode == TextureNormalization::kNone || n <= 0) return;
   double sum = 0.0;
   for (int i = 0; i < n; ++i) sum += patch[i];
   const double mean = sum / n;
   double scale = mean, offset = 0.0;
-  if (mode == "standardize") {
+  if (mode == TextureNormalization::kStandardize) {
     double ss = 0.0;
     for (int i = 0; i < n; ++i) ss += (patch[i] - mean) * (patch[i] - mean);
     scale = std::sqrt(ss / n);
     offset = mean;
-  } else {
-    Require(mode == "gain", fmt::format("texture normalisation '{}': expected none, gain or standardize", mode));
   }
   if (!(std::abs(scale) >= 1e-6)) {
     std::fill(patch, patch + n, 0.0f);
@@ -938,7 +936,7 @@ void NormalizeTexturePatch(float* patch, int n, const std::string& mode) {
   for (int i = 0; i < n; ++i) patch[i] = static_cast<float>((patch[i] - offset) / scale);
 }
 
-Eigen::MatrixXf NormalizeTexturePatches(const Eigen::MatrixXf& patches, const std::string& mode) {
+Eigen::MatrixXf NormalizeTexturePatches(const Eigen::MatrixXf& patches, TextureNormalization mode) {
   using RowMatrixXf = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   RowMatrixXf rows = patches;
   const int n = static_cast<int>(rows.cols());

@@ -118,9 +118,9 @@ struct FernOptions {
 // The patch features' input (FernOptions::fern_texture_normalization) applied in
 // place to one patch of n gray levels; a patch with no light (mean or deviation
 // under 1e-6) becomes 0.
-void NormalizeTexturePatch(float* patch, int n, const std::string& mode);
+void NormalizeTexturePatch(float* patch, int n, TextureNormalization mode);
 // The same for every row of an N × n matrix (a copy).
-Eigen::MatrixXf NormalizeTexturePatches(const Eigen::MatrixXf& patches, const std::string& mode);
+Eigen::MatrixXf NormalizeTexturePatches(const Eigen::MatrixXf& patches, TextureNormalization mode);
 
 // The trained cascade: plain data, so it can be serialised member by member.
 // K = options.num_ferns, F = options.fern_depth, D = dimensions, n = patch_pixels.

@@ -219,7 +219,7 @@ namespace {
 // Difference 6 (WrinkleMapOptions::texture_reference, `mode`): each texture
 // flattened by the neutral scan's texture under the same light (the first texture
 // of each light: the neutral scan comes first).
-void FlattenByNeutral(const std::string& mode, const std::vector<std::string>& lights,
+void FlattenByNeutral(TextureReference mode, const std::vector<std::string>& lights,
                       const std::vector<cv::Mat>& coverage, std::vector<cv::Mat>* textures) {
   std::map<std::string, size_t> neutral;
   for (size_t t = 0; t < textures->size(); ++t) neutral.emplace(lights[t], t);
@@ -436,7 +436,7 @@ TrainingPatches ActorPatchPairs(const ExtractionContext& ctx, const std::string&
   const TrainingOptions& options = ctx.options;
   const auto t0 = Clock::now();
   if (options.wrinkle.texture_reference != TextureReference::kNone)
-    FlattenByNeutral(ToString(options.wrinkle.texture_reference), textures->light, textures->coverage, &textures->gray);
+    FlattenByNeutral(options.wrinkle.texture_reference, textures->light, textures->coverage, &textures->gray);
   cv::Mat coverage = detail_coverage.clone();
   for (const auto& c : textures->coverage) cv::bitwise_and(coverage, c, coverage);
   WrinkleMapBuilder builder(options.detail.map_resolution, coverage, ctx.rig.regions, options.wrinkle);
@@ -586,7 +586,7 @@ DetailModel TrainDetailModelFromPairs(const TrainingPairs& pairs, const Training
   if (pictures) fs::create_directories(outputs.report_dir);
   // The features' input (FernOptions::fern_texture_normalization; capture applies
   // the same in DetailModel::RegressBatch).
-  const Eigen::MatrixXf T = NormalizeTexturePatches(pairs.texture, ToString(options.ferns.fern_texture_normalization));
+  const Eigen::MatrixXf T = NormalizeTexturePatches(pairs.texture, options.ferns.fern_texture_normalization);
   const Eigen::MatrixXf& Dp = pairs.displacement;
   const int total_pairs = static_cast<int>(T.rows());
   const int n = options.patch.patch_size * options.patch.patch_size;

@@ -216,9 +216,10 @@ cv::Mat DogResponse(const cv::Mat& gray_texture, const WrinkleMapOptions& option
 }
 
 cv::Mat FlattenByReference(const cv::Mat& texture, const cv::Mat& reference, const cv::Mat& coverage,
-                           const std::string& mode, double reference_mean) {
-  CheckOneOf("FlattenByReference", "mode", mode, {"ratio", "difference"});
-  const bool ratio = mode == "ratio";
+                           TextureReference mode, double reference_mean) {
+  Require(mode != TextureReference::kNone,
+          "FlattenByReference: mode 'none' flattens nothing (expected 'ratio' or 'difference')");
+  const bool ratio = mode == TextureReference::kRatio;
   RequireGray(texture, "FlattenByReference texture");
   RequireGray(reference, "FlattenByReference reference");
   Require(texture.size() == reference.size() && (coverage.empty() || coverage.size() == texture.size()),

@@ -141,13 +141,13 @@ struct WrinkleMapOptions {
   void Check() const;
 };
 
-// Difference 6 (WrinkleMapOptions::texture_reference, `mode` "ratio" or
-// "difference"): T · m / T_ref or T − T_ref + m on the texels where both are seen
-// (T, T_ref > 1e-4 and `coverage` non-zero; empty = all), 0 elsewhere; m = the mean
-// of T_ref over those texels of the reference (pass reference_mean < 0 to compute
-// it). All CV_32FC1 of one size.
+// Difference 6 (WrinkleMapOptions::texture_reference, `mode` kRatio or kDifference;
+// kNone throws Error): T · m / T_ref or T − T_ref + m on the texels where both are
+// seen (T, T_ref > 1e-4 and `coverage` non-zero; empty = all), 0 elsewhere; m = the
+// mean of T_ref over those texels of the reference (pass reference_mean < 0 to
+// compute it). All CV_32FC1 of one size.
 cv::Mat FlattenByReference(const cv::Mat& texture, const cv::Mat& reference, const cv::Mat& coverage,
-                           const std::string& mode, double reference_mean = -1.0);
+                           TextureReference mode, double reference_mean = -1.0);
 // m of FlattenByReference: the mean of `reference` over its texels above 1e-4 within
 // `coverage` (empty = all); 0 when there are none.
 double ReferenceMean(const cv::Mat& reference, const cv::Mat& coverage);
