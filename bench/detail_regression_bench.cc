@@ -311,8 +311,8 @@ struct FillCase {
   FillCase() {
     Rng rng(4);
     while (cv::countNonZero(known) < 0.2 * kR * kR) {
-      const cv::RotatedRect r(cv::Point2f(kR * rng.Uniform(0.15, 0.85), kR * rng.Uniform(0.1, 0.9)),
-                              cv::Size2f(32, 32), rng.Uniform(0, 180));
+      const double angle = rng.Uniform(0, 180), y = kR * rng.Uniform(0.1, 0.9);  // one draw per statement
+      const cv::RotatedRect r(cv::Point2f(kR * rng.Uniform(0.15, 0.85), y), cv::Size2f(32, 32), angle);
       cv::Point2f p[4];
       r.points(p);
       std::vector<cv::Point> poly(p, p + 4);

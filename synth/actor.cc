@@ -128,7 +128,9 @@ FaceRig PersonalRig(const FaceRig& rig, const Actor& actor) {
     std::array<Eigen::Vector3d, kWaves> w;
     std::array<double, kWaves> phase;
     for (int k = 0; k < kWaves; ++k) {
-      w[k] = Eigen::Vector3d(rng.Normal(), rng.Normal(), rng.Normal()) * omega;
+      // z, y, x: one draw per statement, in the order GCC used (synth/wrinkles.cc, Draws3).
+      const double wz = rng.Normal(), wy = rng.Normal();
+      w[k] = Eigen::Vector3d(rng.Normal(), wy, wz) * omega;
       phase[k] = rng.Uniform(0.0, 2.0 * std::numbers::pi);
     }
     for (int v = 0; v < nv; ++v) {

@@ -215,7 +215,8 @@ cv::Mat BuildMesoscopicMap(const FaceRig& rig, const FaceAnchors& anchors, const
   {
     const int n = static_cast<int>(params.pore_density_per_mm2 * area_mm2);
     for (int k = 0; k < n; ++k) {
-      const Vec2 uv(rng.Uniform(), rng.Uniform());
+      const double v = rng.Uniform();  // v first: one draw per statement (synth/wrinkles.cc, Draws3)
+      const Vec2 uv(rng.Uniform(), v);
       const double radius = rng.Uniform(0.05, 0.12);
       const double depth = params.pore_depth_mm * rng.Uniform(0.5, 1.5);
       const cv::Point2f c = ToTexel(uv, size);
@@ -230,8 +231,10 @@ cv::Mat BuildMesoscopicMap(const FaceRig& rig, const FaceAnchors& anchors, const
   {
     const int n = static_cast<int>(params.fine_line_density * area_mm2);
     for (int k = 0; k < n; ++k) {
-      const Vec2 uv(rng.Uniform(), rng.Uniform());
-      const double angle = (rng.Uniform() < 0.5 ? -0.7 : 0.7) + rng.Uniform(-0.3, 0.3);
+      const double v = rng.Uniform();  // v first: one draw per statement (synth/wrinkles.cc, Draws3)
+      const Vec2 uv(rng.Uniform(), v);
+      const double family = rng.Uniform() < 0.5 ? -0.7 : 0.7;
+      const double angle = family + rng.Uniform(-0.3, 0.3);
       const Vec2 dir = std::cos(angle) * anchors.lateral + std::sin(angle) * anchors.up;
       const double len_uv = rng.Uniform(0.5, 2.0) / anchors.mm_per_uv;
       const double depth = params.fine_line_depth_mm * rng.Uniform(0.4, 1.2);
@@ -347,7 +350,8 @@ SkinMaps BuildSkinMaps(const FaceRig& rig, const FaceAnchors& a, const SkinParam
   {
     const int n = static_cast<int>(p.freckles * (1.0 - 0.7 * p.tone) * 0.3 * a.mm_per_uv * a.mm_per_uv / 100.0);
     for (int k = 0; k < n; ++k) {
-      const Vec2 uv(rng.Uniform(), rng.Uniform());
+      const double v = rng.Uniform();  // v first: one draw per statement (synth/wrinkles.cc, Draws3)
+      const Vec2 uv(rng.Uniform(), v);
       const double radius = rng.Uniform(0.3, 0.9);
       const double strength = rng.Uniform(0.3, 1.0);
       const cv::Point2f c = ToTexel(uv, size);

@@ -82,6 +82,24 @@ MaskShape ShapeOf(const RegionMask* r, const Vec2& lateral, const Vec2& up) {
 
 Vec2 Centroid(const RegionMask* r) { return ShapeOf(r, Vec2(1, 0), Vec2(0, 1)).centroid; }
 
+// Random draws are made one per statement, in a fixed order: the order in which
+// C++ evaluates function arguments and the operands of an overloaded operator is
+// unspecified, and GCC (right to left) and Clang (left to right) differ, so draws
+// inside one call gave the same seed different actors under the two compilers. The
+// order kept is the one GCC used, so actors made by earlier GCC builds are unchanged.
+struct Draws3 {
+  double ridge, width, depth;
+};
+// A line's ridge, width and depth factors, drawn in that order.
+Draws3 DrawFinish(Rng& rng, std::pair<double, double> ridge, std::pair<double, double> width,
+                  std::pair<double, double> depth) {
+  Draws3 d;
+  d.ridge = rng.Uniform(ridge.first, ridge.second);
+  d.width = rng.Uniform(width.first, width.second);
+  d.depth = rng.Uniform(depth.first, depth.second);
+  return d;
+}
+
 // Builds one wrinkle line along the quadratic Bézier P0 → P2 (control P1), all
 // UV, with waviness and breaks.
 class LineBuilder {
@@ -106,7 +124,8 @@ class LineBuilder {
     std::vector<std::pair<double, double>> breaks;
     const int num_breaks = static_cast<int>(std::floor(rng_.Uniform(0.0, max_breaks + 1.0)));
     for (int b = 0; b < num_breaks; ++b) {
-      breaks.emplace_back(rng_.Uniform(0.25, 0.75) * length, rng_.Uniform(1.5, 3.5));
+      const double gap = rng_.Uniform(1.5, 3.5);  // drawn first (see Draws3)
+      breaks.emplace_back(rng_.Uniform(0.25, 0.75) * length, gap);
     }
     const double modulation = rng_.Uniform(0.0, 0.3);  // slow depth variation along the line
     const double mod_phase = rng_.Uniform(0, 2 * std::numbers::pi);
@@ -396,10 +415,10 @@ std::vector<WrinkleLine> GenerateWrinkleLayout(const FaceAnchors& a, const Wrink
       if (h > a.forehead_height_mm - 5.0) break;  // stay on the forehead
       const double len = brow_span_mm * rng.Uniform(0.35, 0.85) * (1.0 - 0.06 * k);
       const Vec2 c = brow_top_mid + a.up * (h / s) + a.lateral * (rng.Uniform(-0.12, 0.12) * brow_span_mm / s);
-      WrinkleLine line = lb.Centred(WrinkleFamily::kForehead, c, a.lateral, len, rng.Uniform(-1.0, 3.5),
-                                    rng.Uniform(0.15, 0.8), 2.0);
-      finish(std::move(line), (0.15 + 0.55 * age) * df * rng.Uniform(0.7, 1.3),
-             rng.Uniform(0.7, 1.4) * wf, rng.Uniform(0.0, 0.25), 0.5);
+      const double waviness = rng.Uniform(0.15, 0.8), sag = rng.Uniform(-1.0, 3.5);
+      WrinkleLine line = lb.Centred(WrinkleFamily::kForehead, c, a.lateral, len, sag, waviness, 2.0);
+      const Draws3 d = DrawFinish(rng, {0.0, 0.25}, {0.7, 1.4}, {0.7, 1.3});
+      finish(std::move(line), (0.15 + 0.55 * age) * df * d.depth, d.width * wf, d.ridge, 0.5);
     }
   }
   // Glabella frown lines: vertical lines between the inner brow ends.
@@ -413,10 +432,10 @@ std::vector<WrinkleLine> GenerateWrinkleLayout(const FaceAnchors& a, const Wrink
       const Vec2 dir = Rotate(a.up, -tilt * (a.lateral.dot(Perp(a.up)) > 0 ? 1 : -1));
       const double len = rng.Uniform(8.0, 15.0);
       const Vec2 c = g + a.lateral * (off / s) + a.up * ((0.35 * len - rng.Uniform(0.0, 3.0)) / s);
-      WrinkleLine line = lb.Centred(WrinkleFamily::kGlabella, c, dir, len, rng.Uniform(-1.0, 1.0),
-                                    rng.Uniform(0.1, 0.5), 0.5);
-      finish(std::move(line), (0.12 + 0.45 * age) * df * rng.Uniform(0.7, 1.3),
-             rng.Uniform(0.5, 0.9) * wf, rng.Uniform(0.0, 0.3), 0.6);
+      const double waviness = rng.Uniform(0.1, 0.5), sag = rng.Uniform(-1.0, 1.0);
+      WrinkleLine line = lb.Centred(WrinkleFamily::kGlabella, c, dir, len, sag, waviness, 0.5);
+      const Draws3 d = DrawFinish(rng, {0.0, 0.3}, {0.5, 0.9}, {0.7, 1.3});
+      finish(std::move(line), (0.12 + 0.45 * age) * df * d.depth, d.width * wf, d.ridge, 0.6);
     }
   }
   // Crow's feet: a fan radiating from the outer eye corners (a smile or squint
@@ -431,10 +450,10 @@ std::vector<WrinkleLine> GenerateWrinkleLayout(const FaceAnchors& a, const Wrink
       const Vec2 dir = (out * std::cos(angle) + a.up * std::sin(angle)).normalized();
       const double len = rng.Uniform(7.0, 16.0);
       const Vec2 c = origin + dir * ((rng.Uniform(0.0, 3.0) + 0.5 * len) / s);
-      WrinkleLine line = lb.Centred(WrinkleFamily::kCrowsFeet, c, dir, len, rng.Uniform(-1.5, 1.5),
-                                    rng.Uniform(0.1, 0.4), 0.6);
-      finish(std::move(line), (0.06 + 0.3 * age) * df * rng.Uniform(0.7, 1.3),
-             rng.Uniform(0.3, 0.6) * wf, rng.Uniform(0.0, 0.3), 0.7);
+      const double waviness = rng.Uniform(0.1, 0.4), sag = rng.Uniform(-1.5, 1.5);
+      WrinkleLine line = lb.Centred(WrinkleFamily::kCrowsFeet, c, dir, len, sag, waviness, 0.6);
+      const Draws3 d = DrawFinish(rng, {0.0, 0.3}, {0.3, 0.6}, {0.7, 1.3});
+      finish(std::move(line), (0.06 + 0.3 * age) * df * d.depth, d.width * wf, d.ridge, 0.7);
     }
   }
   // Nasolabial folds: from above the nose wing, curving outwards, past the
@@ -442,27 +461,29 @@ std::vector<WrinkleLine> GenerateWrinkleLayout(const FaceAnchors& a, const Wrink
   for (int side = 0; side < 2; ++side) {
     if (rng.Uniform() > 0.3 + 0.7 * std::sqrt(age)) continue;
     const Vec2 out = a.Outward(side);
-    const Vec2 p0 = a.nose_wing[side] + out * (rng.Uniform(2.5, 5.0) / s) + a.up * (rng.Uniform(0.0, 4.0) / s);
-    const Vec2 p2 = a.mouth_corner[side] + out * (rng.Uniform(5.0, 10.0) / s) - a.up * (rng.Uniform(4.0, 12.0) / s);
+    const double rise0 = rng.Uniform(0.0, 4.0), out0 = rng.Uniform(2.5, 5.0);
+    const Vec2 p0 = a.nose_wing[side] + out * (out0 / s) + a.up * (rise0 / s);
+    const double drop2 = rng.Uniform(4.0, 12.0), out2 = rng.Uniform(5.0, 10.0);
+    const Vec2 p2 = a.mouth_corner[side] + out * (out2 / s) - a.up * (drop2 / s);
     const Vec2 p1 = 0.5 * (p0 + p2) + out * (rng.Uniform(3.0, 7.0) / s);
     WrinkleLine line = lb.Make(WrinkleFamily::kNasolabial, p0, p1, p2, rng.Uniform(0.1, 0.5), 0.3);
-    finish(std::move(line), (0.3 + 0.6 * age) * df * rng.Uniform(0.8, 1.2), rng.Uniform(1.6, 2.8) * wf,
-           rng.Uniform(0.1, 0.4), 1.0);
+    const Draws3 d = DrawFinish(rng, {0.1, 0.4}, {1.6, 2.8}, {0.8, 1.2});
+    finish(std::move(line), (0.3 + 0.6 * age) * df * d.depth, d.width * wf, d.ridge, 1.0);
   }
   // Under-eye lines: arcs below the lower lid.
   for (int side = 0; side < 2; ++side) {
     const int n = Count(rng, 0.3 + 2.2 * age, 3);
     const Vec2 along = (a.eye_outer[side] - a.eye_inner[side]).normalized();
     for (int k = 0; k < n; ++k) {
-      const Vec2 c = a.lower_lid[side] - a.up * ((rng.Uniform(3.0, 5.0) + 2.5 * k) / s) +
-                     along * (rng.Uniform(0.0, 3.0) / s);
+      const double shift = rng.Uniform(0.0, 3.0), drop = rng.Uniform(3.0, 5.0);
+      const Vec2 c = a.lower_lid[side] - a.up * ((drop + 2.5 * k) / s) + along * (shift / s);
       const Vec2 dir = along.dot(a.lateral) > 0 ? along : Vec2(-along);
       // Bow downwards in the middle, following the lid.
       const double sag = Perp(dir).dot(a.up) > 0 ? -rng.Uniform(0.5, 2.0) : rng.Uniform(0.5, 2.0);
-      WrinkleLine line = lb.Centred(WrinkleFamily::kUnderEye, c, dir, rng.Uniform(8.0, 16.0), sag,
-                                    rng.Uniform(0.1, 0.3), 1.0);
-      finish(std::move(line), (0.04 + 0.2 * age) * df * rng.Uniform(0.7, 1.3), rng.Uniform(0.3, 0.55) * wf,
-             rng.Uniform(0.0, 0.2), 0.5);
+      const double waviness = rng.Uniform(0.1, 0.3), len = rng.Uniform(8.0, 16.0);
+      WrinkleLine line = lb.Centred(WrinkleFamily::kUnderEye, c, dir, len, sag, waviness, 1.0);
+      const Draws3 d = DrawFinish(rng, {0.0, 0.2}, {0.3, 0.55}, {0.7, 1.3});
+      finish(std::move(line), (0.04 + 0.2 * age) * df * d.depth, d.width * wf, d.ridge, 0.5);
     }
   }
   // Bunny lines: oblique lines on the sides of the nose bridge (nose wrinkler).
@@ -475,10 +496,10 @@ std::vector<WrinkleLine> GenerateWrinkleLayout(const FaceAnchors& a, const Wrink
       const Vec2 c = base + out * (rng.Uniform(3.0, 7.0) / s);
       const double angle = rng.Uniform(0.5, 1.0);  // from horizontal, outer end lower
       const Vec2 dir = (out * std::cos(angle) - a.up * std::sin(angle)).normalized();
-      WrinkleLine line = lb.Centred(WrinkleFamily::kBunny, c, dir, rng.Uniform(5.0, 10.0), rng.Uniform(-0.8, 0.8),
-                                    rng.Uniform(0.05, 0.25), 0.3);
-      finish(std::move(line), (0.06 + 0.25 * age) * df * rng.Uniform(0.7, 1.3), rng.Uniform(0.35, 0.7) * wf,
-             rng.Uniform(0.0, 0.2), 0.3);
+      const double waviness = rng.Uniform(0.05, 0.25), sag = rng.Uniform(-0.8, 0.8), len = rng.Uniform(5.0, 10.0);
+      WrinkleLine line = lb.Centred(WrinkleFamily::kBunny, c, dir, len, sag, waviness, 0.3);
+      const Draws3 d = DrawFinish(rng, {0.0, 0.2}, {0.35, 0.7}, {0.7, 1.3});
+      finish(std::move(line), (0.06 + 0.25 * age) * df * d.depth, d.width * wf, d.ridge, 0.3);
     }
   }
   return lines;

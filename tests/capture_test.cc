@@ -198,7 +198,8 @@ TrackedFrame SimulatedTracker(const StudioFrame& f, int index, double amount, Rn
   for (const char* name : {"cheekSquint_L", "mouthSmile_R"}) beta[rig.ExpressionIndex(name)] += 0.25 * amount;
   t.fit.expression = beta.cwiseMax(0.0).cwiseMin(1.0);
   // The pose: turned by ~1° about the head's origin, moved by ~2.5 mm.
-  const Eigen::Vector3d dt(rng.Uniform(1.0, 2.0), rng.Uniform(-1.5, -0.5), rng.Uniform(-3.0, 3.0));
+  const double dz = rng.Uniform(-3.0, 3.0), dy = rng.Uniform(-1.5, -0.5);  // one draw per statement
+  const Eigen::Vector3d dt(rng.Uniform(1.0, 2.0), dy, dz);
   const Eigen::Quaterniond dR(
       Eigen::AngleAxisd(amount * std::numbers::pi / 180.0, Eigen::Vector3d(0.3, 1.0, 0.1).normalized()));
   t.fit.cam_from_head = f.truth.cam_from_head * Rigid3d(dR, Eigen::Vector3d::Zero());

@@ -77,7 +77,8 @@ const DetailModel& TinyModel() {
     Rng rng(5);
     for (int j = 0; j < 24; ++j) {
       cv::Mat t, d;
-      Frame(0.05 + 0.25 * rng.Uniform(), &t, &d, rng.Uniform(-1.5, 1.5));
+      const double shift = rng.Uniform(-1.5, 1.5);  // one draw per statement
+      Frame(0.05 + 0.25 * rng.Uniform(), &t, &d, shift);
       textures.push_back(t);
       displacements.push_back(d);
     }

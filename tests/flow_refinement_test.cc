@@ -217,7 +217,8 @@ TEST(FlowRefinement, StaysCloseToTheTruthOverAJitterySequence) {
       beta[b] = std::clamp(beta[b] + rng.Uniform(-0.2, 0.2), 0.0, 1.0);
     }
     Rigid3d fit = f.truth.cam_from_head;
-    fit.translation += Eigen::Vector3d(rng.Uniform(-1.5, 1.5), rng.Uniform(-1.5, 1.5), rng.Uniform(-3.0, 3.0));
+    const double dz = rng.Uniform(-3.0, 3.0), dy = rng.Uniform(-1.5, 1.5);  // one draw per statement
+    fit.translation += Eigen::Vector3d(rng.Uniform(-1.5, 1.5), dy, dz);
     const RefinedFrame r = refiner.Refine(Gray8(f.image.srgb8), TrackedWithNoisyLandmarks(f.truth, beta, fit, rng),
                                           TheStudio().actor.identity, f.truth.vertex_visible);
     ASSERT_TRUE(r.refined);

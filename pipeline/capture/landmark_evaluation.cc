@@ -19,7 +19,9 @@ double Iod(const MatX2d& s) { return std::max(1e-9, InterOcularDistance(s)); }
 MatX2d PerturbedTruth(const MatX2d& truth, const ShapeRegressorOptions& o, Rng& rng) {
   const Eigen::RowVector2d g = truth.colwise().mean();
   const double iod = Iod(truth);
-  const Eigen::RowVector2d shift(rng.Normal(0, o.perturb_translation * iod), rng.Normal(0, o.perturb_translation * iod));
+  // y, then x: one draw per statement (argument order is unspecified; GCC's kept).
+  const double dy = rng.Normal(0, o.perturb_translation * iod);
+  const Eigen::RowVector2d shift(rng.Normal(0, o.perturb_translation * iod), dy);
   const double a = rng.Normal(0, o.perturb_rotation_deg) * std::numbers::pi / 180.0;
   const double s = std::exp(rng.Normal(0, o.perturb_scale));
   Eigen::Matrix2d R;

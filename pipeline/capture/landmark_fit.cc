@@ -553,8 +553,9 @@ LandmarkFrameFit GroundTruthPriorFitter::Fit(const MatX2d& projections) {
     const int row = projections.rows() == n ? i : fitter_.landmark_vertex(i);
     // Draw the noise for every point, visible or not, so the noise of a frame does
     // not depend on which points are missing.
-    const Eigen::Vector2d noise(rng_.Normal(0.0, options_.gt_prior_noise_px),
-                                rng_.Normal(0.0, options_.gt_prior_noise_px));
+    // y, then x: one draw per statement (argument order is unspecified; GCC's kept).
+    const double dy = rng_.Normal(0.0, options_.gt_prior_noise_px);
+    const Eigen::Vector2d noise(rng_.Normal(0.0, options_.gt_prior_noise_px), dy);
     if (projections.row(row).allFinite()) {
       last_landmarks_.row(i) = projections.row(row) + noise.transpose();
     } else {
