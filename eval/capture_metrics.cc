@@ -386,7 +386,7 @@ FlowStageErrors PoolFlowStages(const std::vector<FrameCaptureEval>& frames, int*
 // Accumulates LkFromTruth over the frames of a capture.
 class LkFromTruthMeter {
  public:
-  // `capture_options`: the capture's refinement options (capture.json: CaptureOptionsOfJson).
+  // `capture_options`: the capture's refinement options (capture.json: CaptureRunOptions).
   explicit LkFromTruthMeter(const FlowRefinementOptions& capture_options) : lk_(capture_options) {}
   // Frame `index` (8-bit gray) with its truth; `flow_vertex`: the capture's flow points.
   void Add(int index, const cv::Mat& gray8, const FrameTruth& truth, const std::vector<int>& flow_vertex) {
@@ -452,25 +452,26 @@ cv::Mat ReadRgbFrame(const fs::path& path, bool linear) {
   return img;
 }
 
-// The capture's FrameTextureOptions; the map resolution is the one the capture ran at
-// (top-level "map_resolution": the model's, which overrides the option).
-FrameTextureOptions CaptureTextureOptions(const json& capture_json, const std::string& what) {
-  FrameTextureOptions t = CaptureOptionsOfJson(capture_json, what).texture;
-  t.map_resolution = capture_json.value("map_resolution", t.map_resolution);
-  return t;
+// The options the capture ran with (capture.json's "options"); the texture's map
+// resolution is the one the capture ran at (top-level "map_resolution": the model's,
+// which overrides the option).
+CaptureOptions CaptureRunOptions(const json& capture_json, const std::string& what) {
+  CaptureOptions o = CaptureOptionsOfJson(capture_json, what);
+  o.texture.map_resolution = capture_json.value("map_resolution", o.texture.map_resolution);
+  return o;
 }
 
 class AppearanceProbe {
  public:
   // `frames`: the capture's frames; `frame_path`: a frame's image. Reads the truth
   // expression of every frame and the textures of the reference frames.
-  AppearanceProbe(const fs::path& capture, const fs::path& dataset, const json& capture_json, const FaceRig& rig,
+  // `texture`: the capture's texture options (CaptureRunOptions).
+  AppearanceProbe(const fs::path& capture, const fs::path& dataset, const FrameTextureOptions& texture, const FaceRig& rig,
                   const FaceRig& truth_rig, const CameraIntrinsics& K, const std::vector<int>& frames,
                   const std::function<fs::path(int)>& frame_path, const SequenceDatasetInfo& info, const cv::Mat& mask,
                   const AppearanceCeilingOptions& options)
       : capture_(capture), frame_path_(frame_path) {
-    extractor_ = std::make_unique<FrameTextureExtractor>(
-        rig, K, CaptureTextureOptions(capture_json, (capture / "capture.json").string()));
+    extractor_ = std::make_unique<FrameTextureExtractor>(rig, K, texture);
     // The reference: the tracked frames with the smallest true |β|.
     std::vector<std::pair<double, int>> by_expression;
     for (int index : frames) {
@@ -595,6 +596,7 @@ struct CaptureEvalContext {
   fs::path capture, dataset;
   const CaptureEvalOptions& options;
   json cap;                  // capture.json
+  CaptureOptions cap_options;  // its options (CaptureRunOptions)
   SequenceDatasetInfo info;  // dataset.json
   FaceRig truth_rig, rig;  // the dataset's rig; the compatible rig capture used
   // A capture with another rig than the dataset's is measured through a surface
@@ -653,6 +655,7 @@ void CaptureEvalContext::ReadInputs() {
           fmt::format("{}: missing; is {} a `crease capture` folder?", capture_json.string(), capture.string()));
   info = ReadSequenceDatasetInfo(dataset);
   cap = ReadCaptureJson(capture_json);
+  cap_options = CaptureRunOptions(cap, capture_json.string());
   truth_rig = ReadRig(info.RigPath());
   rig = ReadRig(capture / "rig.crig");
   corr = CorrespondRigs(rig, truth_rig);
@@ -736,14 +739,14 @@ struct PreviousFrame {
 // What the frame loop accumulates over the frames.
 struct FrameLoopState {
   explicit FrameLoopState(const CaptureEvalContext& c)
-      : lk_meter(CaptureOptionsOfJson(c.cap, (c.capture / "capture.json").string()).refinement) {
+      : lk_meter(c.cap_options.refinement) {
     if (c.options.appearance.enabled && c.detail_truth) {
-      appearance.emplace(c.capture, c.dataset, c.cap, c.rig, c.truth_rig, c.K, c.frames,
+      appearance.emplace(c.capture, c.dataset, c.cap_options.texture, c.rig, c.truth_rig, c.K, c.frames,
                          [&c](int index) { return c.FramePath(index); }, c.info, c.wrinkle_mask,
                          c.options.appearance);
     }
     if (c.options.registered_truth && c.detail_truth) {
-      registration.emplace(c.rig, c.K, CaptureTextureOptions(c.cap, (c.capture / "capture.json").string()));
+      registration.emplace(c.rig, c.K, c.cap_options.texture);
       chart_u.create(c.R, c.R, CV_32F);
       chart_v.create(c.R, c.R, CV_32F);
       for (int j = 0; j < c.R; ++j) {
