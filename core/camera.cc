@@ -54,29 +54,6 @@ MatX2d Camera::ProjectAll(const MatX3d& points_in_head) const {
   return out;
 }
 
-bool Camera::ProjectWithJacobians(const Eigen::Vector3d& point_in_head, Eigen::Vector2d* pixel,
-                                  Eigen::Matrix<double, 2, 3>* d_pixel_d_point,
-                                  Eigen::Matrix<double, 2, 6>* d_pixel_d_pose) const {
-  const Eigen::Matrix3d R = cam_from_head.rotation.toRotationMatrix();
-  const Eigen::Vector3d q = R * point_in_head + cam_from_head.translation;
-  if (!(q.z() > 1e-9)) return false;
-  const double iz = 1.0 / q.z();
-  if (pixel) *pixel = ProjectCamPoint(q);
-  // ∂pixel/∂q for the pinhole.
-  Eigen::Matrix<double, 2, 3> J;
-  J << intrinsics.fx * iz, 0.0, -intrinsics.fx * q.x() * iz * iz,  //
-      0.0, intrinsics.fy * iz, -intrinsics.fy * q.y() * iz * iz;
-  if (d_pixel_d_point) *d_pixel_d_point = J * R;
-  if (d_pixel_d_pose) {
-    // q(ω, τ) = exp([ω]×) q + τ  ⇒  ∂q/∂ω = −[q]×, ∂q/∂τ = I.
-    Eigen::Matrix3d qx;
-    qx << 0, -q.z(), q.y(), q.z(), 0, -q.x(), -q.y(), q.x(), 0;
-    d_pixel_d_pose->leftCols<3>() = -J * qx;
-    d_pixel_d_pose->rightCols<3>() = J;
-  }
-  return true;
-}
-
 Eigen::Vector3d Camera::PixelRayInHead(double x, double y) const {
   const Eigen::Vector3d d_cam((x - intrinsics.cx) / intrinsics.fx, (y - intrinsics.cy) / intrinsics.fy, 1.0);
   return (cam_from_head.rotation.conjugate() * d_cam).normalized();

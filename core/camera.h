@@ -73,15 +73,6 @@ class Camera {
   // Projects every row of `points_in_head` (#N×3); rows behind the camera are NaN.
   MatX2d ProjectAll(const MatX3d& points_in_head) const;
 
-  // Projection with Jacobians. Returns false (outputs untouched) when the point is
-  // not in front of the camera (z <= 1e-9 mm).
-  //   d_pixel_d_point: ∂pixel/∂point_in_head (2×3).
-  //   d_pixel_d_pose:  ∂pixel/∂(ω, τ) (2×6) for the left perturbation
-  //                    cam_from_head ← (exp([ω]×), τ) · cam_from_head, ω in radians, τ in mm.
-  bool ProjectWithJacobians(const Eigen::Vector3d& point_in_head, Eigen::Vector2d* pixel,
-                            Eigen::Matrix<double, 2, 3>* d_pixel_d_point,
-                            Eigen::Matrix<double, 2, 6>* d_pixel_d_pose) const;
-
   // Unit ray direction in head coordinates through pixel (x, y), and the camera
   // centre in head coordinates.
   Eigen::Vector3d PixelRayInHead(double x, double y) const;

@@ -21,36 +21,6 @@ TEST(Camera, ProjectsLikeThePinholeFormula) {
   EXPECT_DOUBLE_EQ(p.x(), 320 + 500 * 0.1);
   EXPECT_DOUBLE_EQ(p.y(), 240 - 500 * 0.2);
   EXPECT_TRUE(std::isnan(cam.Project(Eigen::Vector3d(0, 0, -5)).x()));
-  EXPECT_FALSE(cam.ProjectWithJacobians(Eigen::Vector3d(0, 0, -5), nullptr, nullptr, nullptr));
-}
-
-TEST(Camera, JacobiansMatchFiniteDifferences) {
-  const Camera cam = TestCamera();
-  const Eigen::Vector3d X(12.0, 30.0, -15.0);
-  Eigen::Vector2d px;
-  Eigen::Matrix<double, 2, 3> Jp;
-  Eigen::Matrix<double, 2, 6> Jpose;
-  ASSERT_TRUE(cam.ProjectWithJacobians(X, &px, &Jp, &Jpose));
-  EXPECT_LT((px - cam.Project(X)).norm(), 1e-12);
-  const double h = 1e-6;
-  for (int k = 0; k < 3; ++k) {
-    Eigen::Vector3d d = Eigen::Vector3d::Zero();
-    d[k] = h;
-    const Eigen::Vector2d num = (cam.Project(X + d) - cam.Project(X - d)) / (2 * h);
-    EXPECT_LT((num - Jp.col(k)).norm(), 1e-5 * (1 + Jp.col(k).norm())) << "point axis " << k;
-  }
-  for (int k = 0; k < 6; ++k) {
-    auto perturbed = [&](double s) {
-      Eigen::Vector3d w = Eigen::Vector3d::Zero(), tau = Eigen::Vector3d::Zero();
-      (k < 3 ? w[k] : tau[k - 3]) = s;
-      const Eigen::Quaterniond dq(Eigen::AngleAxisd(w.norm(), w.norm() > 0 ? w.normalized() : Eigen::Vector3d::UnitX()));
-      Camera c = cam;
-      c.cam_from_head = Rigid3d(dq, tau) * cam.cam_from_head;
-      return c.Project(X);
-    };
-    const Eigen::Vector2d num = (perturbed(h) - perturbed(-h)) / (2 * h);
-    EXPECT_LT((num - Jpose.col(k)).norm(), 1e-4 * (1 + Jpose.col(k).norm())) << "pose axis " << k;
-  }
 }
 
 TEST(Camera, RigidTransformsCompose) {
