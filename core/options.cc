@@ -442,6 +442,20 @@ namespace {
 }
 }  // namespace
 
+std::pair<std::string, double> ParseNameValue(const std::string& item, const std::string& what,
+                                              const std::string& value_word) {
+  const size_t eq = item.find('=');
+  Require(eq != std::string::npos, fmt::format("{} '{}': expected NAME={}", what, item, value_word));
+  const std::string text = item.substr(eq + 1);
+  try {
+    size_t used = 0;
+    const double value = std::stod(text, &used);
+    if (used == text.size() && std::isfinite(value)) return {item.substr(0, eq), value};
+  } catch (const std::exception&) {
+  }
+  throw Error(fmt::format("{} '{}': '{}' is not a number", what, item, text));
+}
+
 void CheckGt(const char* o, const char* f, double v, double b) { if (!(v > b)) Fail(o, f, v, ">", b); }
 void CheckGe(const char* o, const char* f, double v, double b) { if (!(v >= b)) Fail(o, f, v, ">=", b); }
 void CheckLt(const char* o, const char* f, double v, double b) { if (!(v < b)) Fail(o, f, v, "<", b); }

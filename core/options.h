@@ -30,6 +30,7 @@
 #include <cstdint>
 #include <string>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace crease {
@@ -189,6 +190,12 @@ std::string YamlToJsonText(const std::string& yaml_text, const std::string& what
 // (`{"fit": {"seed": 1}}` → `{"fit.seed": 1}`); a key set twice throws Error naming
 // `what` and the key.
 std::string FlattenOptionKeys(const std::string& json_text, const std::string& what);
+
+// One "NAME=VALUE" item of a command line or a spec: the name and the finite number
+// after the first '='. Errors read "<what> '<item>': expected NAME=<value_word>" and
+// "<what> '<item>': '<value>' is not a number".
+std::pair<std::string, double> ParseNameValue(const std::string& item, const std::string& what,
+                                              const std::string& value_word);
 
 // Check helpers for Check(): throw Error("<struct>.<field> = <value> must be <bound>").
 void CheckGt(const char* owner, const char* field, double value, double bound);

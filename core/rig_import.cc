@@ -116,6 +116,18 @@ std::vector<RigPart> ReadRigParts(const fs::path& path) {
   return parts;
 }
 
+std::vector<int> ReadFaceMask(const fs::path& path) {
+  const nlohmann::json j = ReadJsonFile(path);
+  const std::string error = fmt::format("{}: expected a JSON list of vertex ids", path.string());
+  Require(j.is_array(), error);
+  std::vector<int> ids;
+  for (const auto& v : j) {
+    Require(v.is_number_integer(), error);
+    ids.push_back(v.get<int>());
+  }
+  return ids;
+}
+
 std::vector<int> ParseLandmarkIds(const std::string& spec) {
   std::string text = spec, what = "--landmarks";
   std::error_code ec;

@@ -60,6 +60,10 @@ std::vector<RigPart> ReadRigParts(const std::filesystem::path& path);
 // or text. 68 ids name "ibug_1" … "ibug_68". Errors name the spec or the file.
 std::vector<int> ParseLandmarkIds(const std::string& spec);
 
+// A face mask file (`crease rig import --face-mask`): a JSON list of OBJ vertex ids
+// (RigImportOptions::face_vertices). Errors name the file.
+std::vector<int> ReadFaceMask(const std::filesystem::path& path);
+
 // The rig restricted to the named parts (e.g. a face-only tracking rig of a full
 // head): their vertices, the triangles whose corners all lie in them, the same
 // identity and expression modes, UVs, regions and OBJ ids (original_vertex; filled

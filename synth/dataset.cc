@@ -17,6 +17,7 @@
 #include "core/image_io.h"
 #include "core/json_io.h"
 #include "core/mesh_io.h"
+#include "core/options.h"
 #include "core/progress.h"
 #include "core/timer.h"
 
@@ -87,16 +88,8 @@ Eigen::VectorXd ParseExpressionSpec(const std::string& spec, const FaceRig& rig)
     const std::string item = spec.substr(start, end - start);
     start = end + 1;
     if (item.empty()) continue;
-    const size_t eq = item.find('=');
-    Require(eq != std::string::npos, fmt::format("expression '{}': expected NAME=WEIGHT", item));
-    try {
-      size_t used = 0;
-      const double w = std::stod(item.substr(eq + 1), &used);
-      Require(used == item.size() - eq - 1 && std::isfinite(w), "");
-      f.expression[item.substr(0, eq)] = w;
-    } catch (const std::exception&) {
-      throw Error(fmt::format("expression '{}': '{}' is not a number", item, item.substr(eq + 1)));
-    }
+    const auto [name, w] = ParseNameValue(item, "expression", "WEIGHT");
+    f.expression[name] = w;
   }
   const std::vector<double> w = ExpressionWeightsForRig(f, rig);
   return Eigen::Map<const Eigen::VectorXd>(w.data(), static_cast<Eigen::Index>(w.size()));

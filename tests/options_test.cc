@@ -286,5 +286,20 @@ TEST(Options, ToJsonRoundTrips) {
   EXPECT_EQ(b.weights, a.weights);
 }
 
+// NAME=VALUE items (`--expression`, `--identity`, synth's expression specs): the
+// first '=' splits, the value must be a whole finite number.
+TEST(Options, NameValueItemsSplitAtTheFirstEqualsAndNeedAFiniteNumber) {
+  EXPECT_EQ(ParseNameValue("jawOpen=0.25", "expression", "WEIGHT"), std::make_pair(std::string("jawOpen"), 0.25));
+  EXPECT_EQ(ParseNameValue("3=-1e-3", "--identity", "VALUE"), std::make_pair(std::string("3"), -1e-3));
+  const auto error = [](const std::string& item) {
+    return ErrorOf([&] { ParseNameValue(item, "--expression", "VALUE"); });
+  };
+  EXPECT_EQ(error("jawOpen"), "--expression 'jawOpen': expected NAME=VALUE");
+  EXPECT_EQ(error("a=b=2"), "--expression 'a=b=2': 'b=2' is not a number");
+  EXPECT_EQ(error("a=0.5x"), "--expression 'a=0.5x': '0.5x' is not a number");
+  EXPECT_EQ(error("a=inf"), "--expression 'a=inf': 'inf' is not a number");
+  EXPECT_EQ(error("a="), "--expression 'a=': '' is not a number");
+}
+
 }  // namespace
 }  // namespace crease

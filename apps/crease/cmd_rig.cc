@@ -7,7 +7,6 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "apps/crease/commands.h"
 #include "core/error.h"
@@ -15,83 +14,15 @@
 #include "core/file_util.h"
 #include "core/image_io.h"
 #include "core/json_io.h"
+#include "core/painted_regions.h"
 #include "core/rig_import.h"
+#include "core/rig_info.h"
 #include "core/vtk_io.h"
 
 namespace crease::app {
 namespace fs = std::filesystem;
 
 namespace {
-
-// Distinct colours for region masks (linear RGB).
-const std::vector<cv::Vec3f>& RegionPalette() {
-  static const std::vector<cv::Vec3f> p = {{0.90f, 0.30f, 0.10f}, {0.95f, 0.75f, 0.05f}, {0.10f, 0.45f, 0.90f},
-                                           {0.05f, 0.75f, 0.85f}, {0.20f, 0.70f, 0.15f}, {0.55f, 0.85f, 0.20f},
-                                           {0.75f, 0.20f, 0.75f}, {0.85f, 0.10f, 0.35f}, {0.45f, 0.30f, 0.15f}};
-  return p;
-}
-
-// The rig's UV layout (wireframe) with the region masks tinted, for a person to check.
-cv::Mat RegionImage(const FaceRig& rig, int size) {
-  cv::Mat img(size, size, CV_32FC3, cv::Scalar(0.05, 0.05, 0.05));
-  for (size_t r = 0; r < rig.regions.size(); ++r) {
-    cv::Mat m;
-    cv::resize(rig.regions[r].mask, m, cv::Size(size, size), 0, 0, cv::INTER_NEAREST);
-    const cv::Vec3f c = RegionPalette()[r % RegionPalette().size()];
-    img.setTo(cv::Scalar(c[0], c[1], c[2]) * 0.6, m);
-  }
-  const TriMesh& mesh = rig.neutral;
-  for (int f = 0; f < mesh.num_faces(); ++f) {
-    for (int k = 0; k < 3; ++k) {
-      const int a = mesh.F(f, k), b = mesh.F(f, (k + 1) % 3);
-      cv::line(img, cv::Point2d(mesh.UV(a, 0) * size, mesh.UV(a, 1) * size),
-               cv::Point2d(mesh.UV(b, 0) * size, mesh.UV(b, 1) * size), cv::Scalar(0.35, 0.35, 0.35), 1,
-               cv::LINE_AA);
-    }
-  }
-  for (const auto& l : rig.landmarks) {
-    cv::circle(img, cv::Point2d(mesh.UV(l.vertex, 0) * size, mesh.UV(l.vertex, 1) * size), 3,
-               cv::Scalar(1.0, 1.0, 1.0), cv::FILLED, cv::LINE_AA);
-  }
-  return img;
-}
-
-// "NAME=VALUE" pairs → vector indexed by name lookup.
-Eigen::VectorXd ParseWeights(const std::vector<std::string>& pairs, const std::vector<std::string>& names,
-                             const char* kind) {
-  Eigen::VectorXd w = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(names.size()));
-  for (const auto& p : pairs) {
-    const auto eq = p.find('=');
-    if (eq == std::string::npos) throw Error(fmt::format("--{} '{}': expected NAME=VALUE", kind, p));
-    const std::string name = p.substr(0, eq);
-    double value;
-    try {
-      size_t used = 0;
-      value = std::stod(p.substr(eq + 1), &used);
-      if (used != p.size() - eq - 1) throw std::invalid_argument("trailing");
-    } catch (const std::exception&) {
-      throw Error(fmt::format("--{} '{}': '{}' is not a number", kind, p, p.substr(eq + 1)));
-    }
-    auto it = std::find(names.begin(), names.end(), name);
-    if (it == names.end()) {
-      // Identity modes may also be given by index.
-      try {
-        size_t used = 0;
-        const int idx = std::stoi(name, &used);
-        if (used == name.size() && idx >= 0 && idx < static_cast<int>(names.size())) {
-          w[idx] = value;
-          continue;
-        }
-      } catch (const std::exception&) {
-      }
-      std::string known;
-      for (const auto& n : names) known += (known.empty() ? "" : ", ") + n;
-      throw Error(fmt::format("--{}: the rig has no {} named '{}' (it has: {})", kind, kind, name, known));
-    }
-    w[it - names.begin()] = value;
-  }
-  return w;
-}
 
 // rig import
 struct ImportArgs {
@@ -100,48 +31,6 @@ struct ImportArgs {
   RigWriteOptions write;
   bool keep_v = false;
 };
-
-// --face-mask: a JSON list of OBJ vertex ids.
-std::vector<int> ReadFaceMask(const std::string& path) {
-  const nlohmann::json j = ReadJsonFile(path);
-  if (!j.is_array()) throw Error(fmt::format("{}: expected a JSON list of vertex ids", path));
-  std::vector<int> ids;
-  for (const auto& v : j) {
-    if (!v.is_number_integer()) throw Error(fmt::format("{}: expected a JSON list of vertex ids", path));
-    ids.push_back(v.get<int>());
-  }
-  return ids;
-}
-
-// Region masks painted by hand (OBJS/regions/NAME.png) override or add to the derived ones.
-void AddPaintedRegions(const fs::path& objs, FaceRig* rig) {
-  const fs::path region_dir = objs / "regions";
-  if (!fs::is_directory(region_dir)) return;
-  for (const auto& e : fs::directory_iterator(region_dir)) {
-    if (LowerExtension(e.path()) != ".png") continue;
-    const cv::Mat img = ReadImage(e.path(), /*srgb=*/false);
-    if (img.rows != img.cols) throw Error(fmt::format("{}: region masks must be square", e.path().string()));
-    cv::Mat gray;
-    if (img.channels() > 1) {
-      std::vector<cv::Mat> ch;
-      cv::split(img, ch);
-      gray = ch[0];
-    } else {
-      gray = img;
-    }
-    cv::Mat mask = gray > 0.5f;
-    const std::string name = e.path().stem().string();
-    bool replaced = false;
-    for (auto& r : rig->regions) {
-      if (r.name == name) {
-        r.mask = mask;
-        replaced = true;
-      }
-    }
-    if (!replaced) rig->regions.push_back({name, mask});
-    std::printf("region '%s' from %s\n", name.c_str(), e.path().string().c_str());
-  }
-}
 
 void RunImport(ImportArgs& a) {
   RigImportOptions& opt = a.opt;
@@ -159,7 +48,9 @@ void RunImport(ImportArgs& a) {
   }
   RigImportReport report;
   FaceRig rig = ImportObjRig(a.objs, opt, &report);
-  AddPaintedRegions(a.objs, &rig);
+  for (const fs::path& p : AddPaintedRegions(fs::path(a.objs) / "regions", &rig)) {
+    std::printf("region '%s' from %s\n", p.stem().string().c_str(), p.string().c_str());
+  }
   WriteRig(a.out, rig, a.write);
   for (const auto& w : report.warnings) std::printf("warning: %s\n", w.c_str());
   for (const auto& [name, n] : report.part_vertices) std::printf("part %-22s %6d vertices\n", name.c_str(), n);
@@ -227,39 +118,6 @@ struct InfoArgs {
   bool as_json = false;
 };
 
-// The standard regions (StandardRegionNames) the rig lacks.
-std::vector<std::string> MissingStandardRegions(const FaceRig& rig) {
-  std::vector<std::string> missing;
-  for (const auto& n : StandardRegionNames()) {
-    if (!rig.FindRegion(n)) missing.push_back(n);
-  }
-  return missing;
-}
-
-// `rig info --json`.
-nlohmann::json RigInfoJson(const FaceRig& rig, const std::string& file) {
-  const auto [lo, hi] = BoundingBox(rig.neutral);
-  nlohmann::json j;
-  j["file"] = file;
-  j["source"] = rig.source;
-  j["vertices"] = rig.num_vertices();
-  j["triangles"] = rig.neutral.num_faces();
-  j["extent_mm"] = {hi.x() - lo.x(), hi.y() - lo.y(), hi.z() - lo.z()};
-  j["identity_modes"] = rig.num_identity();
-  j["expressions"] = rig.expression_names;
-  nlohmann::json lms = nlohmann::json::object();
-  for (const auto& l : rig.landmarks) lms[l.name] = l.vertex;
-  j["landmarks"] = lms;
-  nlohmann::json regions = nlohmann::json::object();
-  for (const auto& r : rig.regions) {
-    regions[r.name] = {{"size", r.mask.rows},
-                       {"coverage", static_cast<double>(cv::countNonZero(r.mask)) / r.mask.total()}};
-  }
-  j["regions"] = regions;
-  j["missing_standard_regions"] = MissingStandardRegions(rig);
-  return j;
-}
-
 // `rig info` as text.
 void PrintRigInfo(const FaceRig& rig, const std::string& file) {
   const auto [lo, hi] = BoundingBox(rig.neutral);
@@ -295,7 +153,7 @@ void AddInfoCommand(CLI::App* rig_cmd) {
       PrintRigInfo(rig, a->file);
     }
     if (!a->regions_png.empty()) {
-      WriteImage(a->regions_png, RegionImage(rig, 1024));
+      WriteImage(a->regions_png, RegionPicture(rig, 1024));
       if (!a->as_json) std::printf("wrote %s\n", a->regions_png.c_str());
     }
   });
@@ -309,21 +167,15 @@ struct EvaluateArgs {
 
 void RunEvaluate(const EvaluateArgs& a) {
   const FaceRig rig = ReadRig(a.file);
-  const Eigen::VectorXd b = ParseWeights(a.expressions, rig.expression_names, "expression");
-  const Eigen::VectorXd alpha = ParseWeights(a.identity, rig.identity_names, "identity");
+  const Eigen::VectorXd b = ParseNamedCoefficients(a.expressions, rig.expression_names, "expression");
+  const Eigen::VectorXd alpha = ParseNamedCoefficients(a.identity, rig.identity_names, "identity");
   const TriMesh mesh = rig.Evaluate(alpha, b);
   if (LowerExtension(a.out) == ".vtp") {
     const MatX3d d = mesh.V - rig.neutral.V;
-    Eigen::MatrixXd region = Eigen::MatrixXd::Constant(mesh.num_vertices(), 1, -1.0);
-    for (int v = 0; v < mesh.num_vertices(); ++v) {
-      for (size_t r = 0; r < rig.regions.size() && region(v, 0) < 0; ++r) {
-        if (rig.InRegion(rig.regions[r].name, mesh.UV.row(v).transpose())) region(v, 0) = static_cast<double>(r);
-      }
-    }
     WriteVtp(a.out, mesh,
              {{"displacement_mm", Eigen::MatrixXd(d)},
               {"displacement_magnitude_mm", Eigen::MatrixXd(d.rowwise().norm())},
-              {"region", region}});
+              {"region", VertexRegionIndices(rig, mesh)}});
   } else {
     WriteAnyMesh(a.out, mesh);
   }
