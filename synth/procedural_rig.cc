@@ -61,6 +61,7 @@
 
 #include "core/error.h"
 #include "core/mesh_ops.h"
+#include "core/preview_render.h"
 
 namespace crease {
 
@@ -1799,5 +1800,42 @@ MatX3d ProceduralRigPreviewColors(const FaceRig& rig) {
   }
   return colors;
 }
+
+cv::Mat RigContactSheet(const FaceRig& rig, int tile) {
+  struct View {
+    double azimuth;
+    std::vector<std::pair<std::string, double>> weights;
+  };
+  const std::vector<View> views = {
+      {0.0, {}},
+      {35.0, {}},
+      {90.0, {}},
+      {0.0, {{"mouthSmile_L", 1.0}, {"mouthSmile_R", 1.0}, {"cheekSquint_L", 0.6}, {"cheekSquint_R", 0.6}}},
+      {30.0, {{"jawOpen", 0.8}, {"browInnerUp_L", 1.0}, {"browInnerUp_R", 1.0}, {"browOuterUp_L", 0.6},
+              {"browOuterUp_R", 0.6}}},
+      {-20.0, {{"eyeBlink_L", 1.0}, {"eyeSquint_R", 1.0}, {"browDown_L", 1.0}, {"browDown_R", 1.0},
+               {"noseSneer_L", 0.8}, {"noseSneer_R", 0.8}, {"mouthFrown_L", 0.7}, {"mouthFrown_R", 0.7}}},
+  };
+  const MatX3d colors = ProceduralRigPreviewColors(rig);
+  const int cols = 3, rows = static_cast<int>((views.size() + cols - 1) / cols);
+  cv::Mat sheet(rows * tile, cols * tile, CV_32FC3, cv::Scalar(0, 0, 0));
+  for (size_t i = 0; i < views.size(); ++i) {
+    Eigen::VectorXd w = Eigen::VectorXd::Zero(rig.num_expressions());
+    for (const auto& [name, value] : views[i].weights) {
+      const int e = rig.ExpressionIndex(name);
+      if (e >= 0) w[e] = value;
+    }
+    PreviewRenderOptions o;
+    o.width = o.height = tile;
+    o.azimuth_deg = views[i].azimuth;
+    o.elevation_deg = 5.0;
+    o.margin = 0.72;
+    o.key_light_dir = {-0.4, 0.5, 0.9};
+    const PreviewRender r = RenderPreview(rig.Evaluate({}, w), o, colors);
+    r.image.copyTo(sheet(cv::Rect(static_cast<int>(i % cols) * tile, static_cast<int>(i / cols) * tile, tile, tile)));
+  }
+  return sheet;
+}
+
 
 }  // namespace crease

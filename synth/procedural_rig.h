@@ -126,4 +126,11 @@ ChartDistortion MeasureFaceChartDistortion(const FaceRig& rig);
 // (by region mask), hair, sclera, iris, pupil, mouth cavity.
 MatX3d ProceduralRigPreviewColors(const FaceRig& rig);
 
+// A contact sheet of the rig (`crease synth rig --preview`; linear RGB, CV_32FC3):
+// 2 rows × 3 columns of `tile`-pixel square previews (core/preview_render.h)
+// coloured by ProceduralRigPreviewColors: the neutral from the front, three-quarter
+// and side, then a smile, a jaw drop with raised brows and an asymmetric frown.
+// Expressions the rig lacks are left out of their tile.
+cv::Mat RigContactSheet(const FaceRig& rig, int tile);
+
 }  // namespace crease

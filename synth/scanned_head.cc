@@ -1,7 +1,10 @@
 #include "synth/scanned_head.h"
 
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <functional>
+#include <numbers>
 #include <fmt/format.h>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
@@ -15,6 +18,7 @@
 #include "core/mesh_io.h"
 #include "core/mesh_ops.h"
 #include "synth/hires_surface.h"
+#include "synth/studio.h"
 #include "synth/wrinkles.h"
 
 namespace crease {
@@ -348,6 +352,41 @@ ScannedHead LoadScannedHead(const std::filesystem::path& mesh_path, const std::f
   head.surface = BuildHiResSurface(GridLayoutOf(scan, options, disp.rows, mesh_path), scan, disp, options.phong_alpha);
   if (!normal_map.empty()) head.surface.N = NormalsFromNormalMap(head.surface, normal_map, options);
   return head;
+}
+
+TriMesh TurnedHead(const ScannedHead& head, double yaw_deg) {
+  TriMesh m = head.surface;
+  const auto [lo, hi] = BoundingBox(m);
+  const Eigen::Vector3d centre = 0.5 * (lo + hi);
+  const double r = yaw_deg * std::numbers::pi / 180.0;
+  const Eigen::Matrix3d R = Eigen::AngleAxisd(r, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  for (int v = 0; v < m.num_vertices(); ++v) m.V.row(v) = (R * (m.V.row(v).transpose() - centre) + centre).transpose();
+  if (m.N.rows() == m.num_vertices()) m.N = m.N * R.transpose();  // the normal map's shading normals turn too
+  return m;
+}
+
+Camera FramingCamera(const TriMesh& m, double fov_deg, int width, int height) {
+  const auto [lo, hi] = BoundingBox(m);
+  const Eigen::Vector3d centre = 0.5 * (lo + hi);
+  const double radius = 0.5 * (hi - lo).norm();
+  const CameraIntrinsics K = CameraIntrinsics::FromFov(fov_deg, width, height);
+  const double distance =
+      radius / std::sin(0.5 * std::min(fov_deg, fov_deg * height / width) * std::numbers::pi / 180.0);
+  return LookAtCamera(K, centre + Eigen::Vector3d(0, 0, distance), centre, Eigen::Vector3d::UnitY());
+}
+
+ScanRender RenderScannedHead(const ScannedHead& head, const ScanRenderOptions& o, const std::string& name) {
+  const TriMesh m = TurnedHead(head, o.yaw_deg);
+  const Camera camera = FramingCamera(head.surface, o.fov_deg, o.width, o.height);  // the head before turning
+  Renderer renderer(m, head.materials, RendererOptions{}, name);
+  RenderOptions ro;
+  ro.samples_per_axis = o.samples_per_axis;
+  Rng rng(o.seed);
+  ScanRender out;
+  out.render = renderer.Render(camera, LightRigFromSpec(o.light), ro, rng);
+  out.image = ApplySensor(out.render.image, o.sensor, rng);
+  out.rendered_vertices = m.num_vertices();
+  return out;
 }
 
 }  // namespace crease

@@ -39,9 +39,11 @@
 #include <string>
 #include <vector>
 
+#include "core/camera.h"
 #include "core/options.h"
 #include "core/tri_mesh.h"
 #include "synth/renderer.h"
+#include "synth/sensor.h"
 
 namespace crease {
 
@@ -79,6 +81,36 @@ struct ScannedHead {
 ScannedHead LoadScannedHead(const std::filesystem::path& mesh, const std::filesystem::path& albedo,
                             const std::filesystem::path& displacement, const ScannedHeadOptions& options,
                             const std::filesystem::path& normal_map = {});
+
+// The head's surface turned by `yaw_deg` about +y through the centre of its
+// bounding box (positions and, when present, shading normals).
+TriMesh TurnedHead(const ScannedHead& head, double yaw_deg);
+
+// A camera of horizontal field of view `fov_deg` on the +z axis from the centre of
+// the mesh's bounding box, looking at that centre (up +y), at the distance where the
+// box's bounding sphere fills the narrower field of view.
+Camera FramingCamera(const TriMesh& mesh, double fov_deg, int width, int height);
+
+// One still of a scanned head (`crease synth render-scan`).
+struct ScanRenderOptions {
+  double yaw_deg = 0.0;           // TurnedHead
+  double fov_deg = 30.0;          // horizontal; FramingCamera of the head before turning
+  int width = 640, height = 480;  // pixels
+  int samples_per_axis = 2;       // anti-aliasing: N×N samples per pixel
+  std::string light = "studio";   // a light rig spec (synth/studio.h LightRigFromSpec)
+  SensorOptions sensor;           // the studio's sensor
+  uint64_t seed = 1;              // sensor noise
+};
+
+struct ScanRender {
+  RenderResult render;      // linear, noiseless
+  SensorImage image;        // through the sensor
+  int rendered_vertices = 0;
+};
+
+// Renders the head turned by options.yaw_deg under options.light, seen by the
+// framing camera, through the sensor. `name` names the scene in errors.
+ScanRender RenderScannedHead(const ScannedHead& head, const ScanRenderOptions& options, const std::string& name);
 
 // The shading normals a normal map gives `mesh` (with UVs, crease convention: v
 // downwards; normals computed when absent), per vertex, unit length; see above.

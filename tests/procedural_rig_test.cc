@@ -355,5 +355,34 @@ TEST(ProceduralRig, OptionsAreChecked) {
   EXPECT_EQ(small.landmarks.size(), 68u);
 }
 
+// The contact sheet (`crease synth rig --preview`): 2 × 3 tiles, each showing the
+// head; the smile tile (front view) differs from the neutral front view, and for a
+// rig without expressions it is the neutral front view exactly.
+TEST(ProceduralRig, ContactSheetShowsViewsAndExpressions) {
+  const int tile = 64;
+  const cv::Mat sheet = RigContactSheet(Rig(), tile);
+  ASSERT_EQ(sheet.type(), CV_32FC3);
+  ASSERT_EQ(sheet.size(), cv::Size(3 * tile, 2 * tile));
+  const auto tile_at = [&](const cv::Mat& m, int i) {
+    return m(cv::Rect((i % 3) * tile, (i / 3) * tile, tile, tile)).clone();
+  };
+  const auto differ = [](const cv::Mat& a, const cv::Mat& b) { return cv::norm(a, b, cv::NORM_INF) > 0.0; };
+  for (int i = 0; i < 6; ++i) {
+    cv::Mat gray;
+    cv::extractChannel(tile_at(sheet, i), gray, 0);
+    const float background = gray.at<float>(0, 0);  // a corner
+    EXPECT_GT(cv::countNonZero(gray != background), tile * tile / 10) << "tile " << i;  // the head fills it
+  }
+  EXPECT_TRUE(differ(tile_at(sheet, 0), tile_at(sheet, 1)));  // front vs three-quarter
+  EXPECT_TRUE(differ(tile_at(sheet, 1), tile_at(sheet, 2)));  // three-quarter vs side
+  EXPECT_TRUE(differ(tile_at(sheet, 0), tile_at(sheet, 3)));  // the smile shows
+  FaceRig still = Rig();
+  still.expression_basis.resize(still.expression_basis.rows(), 0);
+  still.expression_names.clear();
+  const cv::Mat still_sheet = RigContactSheet(still, tile);
+  EXPECT_FALSE(differ(tile_at(still_sheet, 3), tile_at(sheet, 0)));
+  EXPECT_FALSE(differ(tile_at(still_sheet, 0), tile_at(sheet, 0)));
+}
+
 }  // namespace
 }  // namespace crease

@@ -280,5 +280,62 @@ TEST(ScannedHead, GltfWithLyingSizesIsAClearError) {
             std::string::npos);
 }
 
+// A sphere of radius 50 mm centred off the origin, with outward shading normals.
+ScannedHead SphereHead() {
+  ScannedHead head;
+  head.surface = MakeUVSphere(50.0, 12, 16);
+  head.surface.N = head.surface.V.rowwise().normalized();
+  head.surface.V.rowwise() += Eigen::RowVector3d(10.0, -20.0, 30.0);
+  return head;
+}
+
+// TurnedHead turns about +y through the bounding box's centre: 0° changes nothing,
+// 90° keeps heights and distances from the centre, sends +x to −z, and turns the
+// shading normals with the surface.
+TEST(ScannedHead, TurnedHeadTurnsAboutTheBoxCentre) {
+  const ScannedHead head = SphereHead();
+  EXPECT_EQ(TurnedHead(head, 0.0).V, head.surface.V);
+  const TriMesh t = TurnedHead(head, 90.0);
+  const Eigen::RowVector3d centre(10.0, -20.0, 30.0);
+  ASSERT_EQ(t.num_vertices(), head.surface.num_vertices());
+  int east = 0;
+  for (int v = 0; v < t.num_vertices(); ++v) {
+    const Eigen::RowVector3d before = head.surface.V.row(v) - centre, after = t.V.row(v) - centre;
+    EXPECT_NEAR(after.y(), before.y(), 1e-9);
+    EXPECT_NEAR(after.norm(), before.norm(), 1e-9);
+    EXPECT_NEAR(after.z(), -before.x(), 1e-9);
+    EXPECT_NEAR(after.x(), before.z(), 1e-9);
+    EXPECT_LT((t.N.row(v) - after / after.norm()).norm(), 1e-9);  // normals turned alike
+    east += before.x() > 49.0;
+  }
+  EXPECT_GT(east, 0);
+}
+
+// FramingCamera looks at the box centre from +z: the centre projects to the principal
+// point, every vertex lands in the image, and the box's bounding sphere just fits the
+// narrower (vertical, for 4:3) field of view.
+TEST(ScannedHead, FramingCameraFramesTheBoundingSphere) {
+  const ScannedHead head = SphereHead();
+  const int width = 160, height = 120;
+  const Camera camera = FramingCamera(head.surface, 40.0, width, height);
+  const auto [lo, hi] = BoundingBox(head.surface);
+  const Eigen::Vector3d centre = 0.5 * (lo + hi);
+  const double radius = 0.5 * (hi - lo).norm();
+  const Eigen::Vector2d c = camera.Project(centre);
+  EXPECT_NEAR(c.x(), camera.intrinsics.cx, 1e-6);
+  EXPECT_NEAR(c.y(), camera.intrinsics.cy, 1e-6);
+  const Eigen::Vector3d eye = camera.CentreInHead() - centre;
+  EXPECT_NEAR(eye.x(), 0.0, 1e-9);
+  EXPECT_NEAR(eye.y(), 0.0, 1e-9);
+  EXPECT_GT(eye.z(), radius);
+  for (int v = 0; v < head.surface.num_vertices(); ++v) {
+    EXPECT_TRUE(camera.InImage(camera.Project(head.surface.V.row(v).transpose()))) << v;
+  }
+  // The tangent ray to the bounding sphere makes (nearly) half the vertical field of view.
+  const double half_vertical = std::atan(0.5 * height / camera.intrinsics.fy);
+  EXPECT_LE(std::asin(radius / eye.z()), half_vertical);
+  EXPECT_GT(std::asin(radius / eye.z()), half_vertical - 1e-2);
+}
+
 }  // namespace
 }  // namespace crease

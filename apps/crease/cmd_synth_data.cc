@@ -5,7 +5,6 @@
 #include <memory>
 #include <string>
 #include <vector>
-#include <numbers>
 #include <fmt/format.h>
 
 #include "apps/crease/commands.h"
@@ -33,15 +32,7 @@ std::string LightChoices() {
 }
 
 void ParseSize(const std::string& size, StudioOptions* studio) {
-  if (size.empty()) return;
-  const auto x = size.find('x');
-  try {
-    if (x == std::string::npos) throw std::invalid_argument("no x");
-    studio->width = std::stoi(size.substr(0, x));
-    studio->height = std::stoi(size.substr(x + 1));
-  } catch (const std::exception&) {
-    throw Error(fmt::format("--size '{}': expected WIDTHxHEIGHT, e.g. 640x480", size));
-  }
+  ParseSizeFlag(size, "640x480", &studio->width, &studio->height);
 }
 
 Actor LoadOrGenerateActor(const FaceRig& rig, const std::string& actor_file, uint64_t seed) {
@@ -263,29 +254,6 @@ struct RenderScanArgs {
   uint64_t seed = 1;
 };
 
-// The scanned head turned by `yaw_deg` about its bounding box's centre (normals too).
-TriMesh TurnedHead(const ScannedHead& head, double yaw_deg) {
-  TriMesh m = head.surface;
-  const auto [lo, hi] = BoundingBox(m);
-  const Eigen::Vector3d centre = 0.5 * (lo + hi);
-  const double r = yaw_deg * std::numbers::pi / 180.0;
-  const Eigen::Matrix3d R = Eigen::AngleAxisd(r, Eigen::Vector3d::UnitY()).toRotationMatrix();
-  for (int v = 0; v < m.num_vertices(); ++v) m.V.row(v) = (R * (m.V.row(v).transpose() - centre) + centre).transpose();
-  if (m.N.rows() == m.num_vertices()) m.N = m.N * R.transpose();  // the normal map's shading normals turn too
-  return m;
-}
-
-// A camera of `fov_deg` on the +z axis that frames the bounding sphere of the mesh's bounding box.
-Camera FramingCamera(const TriMesh& m, double fov_deg, int width, int height) {
-  const auto [lo, hi] = BoundingBox(m);
-  const Eigen::Vector3d centre = 0.5 * (lo + hi);
-  const double radius = 0.5 * (hi - lo).norm();
-  const CameraIntrinsics K = CameraIntrinsics::FromFov(fov_deg, width, height);
-  const double distance =
-      radius / std::sin(0.5 * std::min(fov_deg, fov_deg * height / width) * std::numbers::pi / 180.0);
-  return LookAtCamera(K, centre + Eigen::Vector3d(0, 0, distance), centre, Eigen::Vector3d::UnitY());
-}
-
 void RunRenderScan(RenderScanArgs& a) {
   if (!a.units.empty()) a.so.units_to_mm = UnitsToMm(a.units);
   a.so.normal_map_space = FromString<NormalMapSpace>(a.normal_space, "--normal-space");
@@ -293,19 +261,21 @@ void RunRenderScan(RenderScanArgs& a) {
   for (const auto& w : head.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   StudioOptions studio;
   ParseSize(a.size, &studio);
-  const TriMesh m = TurnedHead(head, a.yaw);
-  const Camera camera = FramingCamera(head.surface, a.fov, studio.width, studio.height);  // the head before turning
-  Renderer renderer(m, head.materials, RendererOptions{}, a.mesh);
-  RenderOptions ro;
+  ScanRenderOptions ro;
+  ro.yaw_deg = a.yaw;
+  ro.fov_deg = a.fov;
+  ro.width = studio.width;
+  ro.height = studio.height;
   ro.samples_per_axis = a.samples;
-  Rng rng(a.seed);
-  const RenderResult img = renderer.Render(camera, LightRigFromSpec(a.light), ro, rng);
-  const SensorImage sensor = ApplySensor(img.image, studio.sensor, rng);
+  ro.light = a.light;
+  ro.sensor = studio.sensor;
+  ro.seed = a.seed;
+  const ScanRender img = RenderScannedHead(head, ro, a.mesh);
   cv::Mat srgb;
-  sensor.srgb8.convertTo(srgb, CV_8U);
+  img.image.srgb8.convertTo(srgb, CV_8U);
   WriteImage(a.out, srgb, {.srgb = false});
   std::printf("wrote %s (%d scan vertices, %d rendered vertices, %.0f ms)\n", a.out.c_str(), head.source_vertices,
-              m.num_vertices(), 1e3 * img.stats.seconds);
+              img.rendered_vertices, 1e3 * img.render.stats.seconds);
 }
 
 void AddRenderScanCommand(CLI::App* synth) {

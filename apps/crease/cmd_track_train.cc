@@ -65,16 +65,7 @@ void AddTrainTrackerCommand(CLI::App& app) {
     if (a->actors >= 0) options.train_actors = a->actors;
     if (a->test_actors >= 0) options.test_actors = a->test_actors;
     if (a->renders >= 0) options.renders_per_actor = a->renders;
-    if (!a->size.empty()) {
-      const auto x = a->size.find('x');
-      try {
-        if (x == std::string::npos) throw std::invalid_argument("no x");
-        options.width = std::stoi(a->size.substr(0, x));
-        options.height = std::stoi(a->size.substr(x + 1));
-      } catch (const std::exception&) {
-        throw Error(fmt::format("--size '{}': expected WIDTHxHEIGHT, e.g. 320x240", a->size));
-      }
-    }
+    ParseSizeFlag(a->size, "320x240", &options.width, &options.height);
     if (!a->config.empty()) SetOptionsFromYaml(ReadFileToString(a->config), a->config, &options);
     if (!a->sets.empty()) SetOptionsFromJson(SetPairsToJson(a->sets), "--set", &options);
     options.Check();

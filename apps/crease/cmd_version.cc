@@ -42,6 +42,18 @@ std::string SetPairsToJson(const std::vector<std::string>& pairs) {
   return j.dump();
 }
 
+void ParseSizeFlag(const std::string& size, const std::string& example, int* width, int* height) {
+  if (size.empty()) return;
+  const auto x = size.find('x');
+  try {
+    if (x == std::string::npos) throw std::invalid_argument("no x");
+    *width = std::stoi(size.substr(0, x));
+    *height = std::stoi(size.substr(x + 1));
+  } catch (const std::exception&) {
+    throw Error(fmt::format("--size '{}': expected WIDTHxHEIGHT, e.g. {}", size, example));
+  }
+}
+
 void AddVersionCommand(CLI::App& app) {
   auto* cmd = app.add_subcommand("version", "Print crease's version and the libraries it was built with");
   cmd->callback([] {

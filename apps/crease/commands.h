@@ -17,6 +17,10 @@ std::string SetPairsToJson(const std::vector<std::string>& pairs);
 // "a,b,,c" → {"a", "b", "c"} (empty items dropped).
 std::vector<std::string> SplitComma(const std::string& s);
 
+// "WIDTHxHEIGHT" (a --size flag) → *width, *height; "" leaves them as they are.
+// Errors show `example`, e.g. "640x480".
+void ParseSizeFlag(const std::string& size, const std::string& example, int* width, int* height);
+
 void AddVersionCommand(CLI::App& app);
 void AddMeshCommands(CLI::App& app);
 void AddRigCommands(CLI::App& app);
