@@ -1566,4 +1566,20 @@ std::string CaptureEvalSummary::ToMarkdown() const {
   return o.str();
 }
 
+void WriteCaptureEval(const fs::path& dir, const CaptureEvalSummary& s) {
+  fs::create_directories(dir);
+  const std::string md = s.ToMarkdown(), csv = s.ToCsv(), js_line = s.ToJson() + "\n";
+  auto text = [](const std::string& t) {
+    return [&t](const fs::path& tmp) { WriteFileAtomic(tmp, [&](std::ostream& o) { o << t; }); };
+  };
+  // All or nothing: a failed write left eval.json beside an older eval_frames.csv.
+  std::vector<PendingFile> files = {{dir / "eval_frames.csv", text(csv)}, {dir / "eval.md", text(md)}};
+  if (!s.error_vectors.empty()) {  // Fig. 11
+    files.push_back({dir / "error_vectors.png",
+                     [&](const fs::path& tmp) { WriteImage(tmp, s.error_vectors, {.srgb = false}); }});
+  }
+  files.push_back({dir / "eval.json", text(js_line)});
+  WriteFilesAtomic(files);
+}
+
 }  // namespace crease

@@ -278,4 +278,9 @@ SurfaceError MeasureSurface(const TriMesh& h, const RayCaster& truth, double max
 CaptureEvalSummary EvaluateCapture(const std::filesystem::path& capture, const std::filesystem::path& dataset,
                                    const CaptureEvalOptions& options);
 
+// Writes a capture's evaluation into `dir` (created when missing): eval_frames.csv
+// (ToCsv), eval.md (ToMarkdown), error_vectors.png (Fig. 11, when the summary has
+// one) and eval.json (ToJson and a newline), all or nothing (WriteFilesAtomic).
+void WriteCaptureEval(const std::filesystem::path& dir, const CaptureEvalSummary& summary);
+
 }  // namespace crease

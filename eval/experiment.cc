@@ -19,6 +19,7 @@
 #include <thread>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "core/error.h"
 #include "core/file_lock.h"
@@ -375,6 +376,35 @@ ExperimentConfig ReadExperimentConfig(const fs::path& path) {
   ExperimentConfig c = ParseExperimentConfig(ReadFileToString(path), path.string());
   c.source = path;
   return c;
+}
+
+std::vector<fs::path> ListExperimentConfigs(const fs::path& dir) {
+  Require(fs::is_directory(dir), fmt::format("{}: no experiments folder (set CREASE_SOURCE_DIR to the crease "
+                                             "source tree)", dir.string()));
+  std::vector<fs::path> all;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().extension() == ".yaml") all.push_back(e.path());
+  std::sort(all.begin(), all.end());
+  std::vector<fs::path> ordered;
+  std::ifstream order(dir / "ORDER");
+  std::string name;
+  while (order >> name) {
+    const fs::path p = dir / (name + ".yaml");
+    if (std::find(all.begin(), all.end(), p) != all.end()) ordered.push_back(p);
+  }
+  for (const auto& p : all)
+    if (std::find(ordered.begin(), ordered.end(), p) == ordered.end()) ordered.push_back(p);
+  return ordered;
+}
+
+fs::path ResolveExperimentConfig(const std::string& name, const fs::path& dir) {
+  if (fs::exists(name) && fs::is_regular_file(name)) return name;
+  const fs::path p = dir / (name + ".yaml");
+  if (fs::exists(p)) return p;
+  std::vector<std::string> names;
+  for (const auto& c : ListExperimentConfigs(dir)) names.push_back(c.stem().string());
+  throw Error(fmt::format("experiment '{}': no such config file or experiment (known: {}, all)", name,
+                          fmt::join(names, ", ")));
 }
 
 ExperimentConfig ApplyProfile(const ExperimentConfig& config, const std::string& profile) {

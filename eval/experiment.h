@@ -125,6 +125,15 @@ const std::vector<std::string>& ExperimentSections();
 ExperimentConfig ParseExperimentConfig(const std::string& yaml_text, const std::string& what);
 ExperimentConfig ReadExperimentConfig(const std::filesystem::path& path);
 
+// The configs (*.yaml) of an experiments folder (`crease experiment list`, `run
+// all`): first those DIR/ORDER names (whitespace-separated names without .yaml; the
+// README's order), then the others by file name. Throws Error when DIR is no folder.
+std::vector<std::filesystem::path> ListExperimentConfigs(const std::filesystem::path& dir);
+
+// `name` as a config: an existing file as it is, else DIR/NAME.yaml. Otherwise
+// throws Error listing the known experiments.
+std::filesystem::path ResolveExperimentConfig(const std::string& name, const std::filesystem::path& dir);
+
 // Applies profile `profile` ("" = none; a name the config lacks is an error).
 ExperimentConfig ApplyProfile(const ExperimentConfig& config, const std::string& profile);
 

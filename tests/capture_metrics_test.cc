@@ -8,7 +8,10 @@
 
 #include <opencv2/core.hpp>
 
+#include "core/file_util.h"
+#include "core/image_io.h"
 #include "core/ray_caster.h"
+#include "tests/test_util.h"
 #include "pipeline/capture/capture_io.h"
 #include "pipeline/capture/flow_refinement.h"
 
@@ -155,6 +158,24 @@ TEST(CaptureMetrics, SurfaceErrorInTheWrinkleRegionsCountsOnlyTheirVertices) {
   EXPECT_NEAR(e.wrinkle_distance_mm, 0.1 / std::cos(tilt), 1e-5);
   EXPECT_NEAR(e.distance_mm, (left * 0.1 / std::cos(tilt) + (n * n - left) * 0.1) / (n * n), 1e-5);
   EXPECT_EQ(MeasureSurface(h, caster, 5.0, cv::Mat()).wrinkle_samples, 0);
+}
+
+// `crease eval`'s files: the summary's CSV, Markdown and JSON texts as they are, and
+// the Fig. 11 picture only when the summary has one.
+TEST(CaptureMetrics, EvalFilesHoldTheSummaryAndThePictureOnlyWhenThereIsOne) {
+  const std::filesystem::path dir = testing::TestDir() / "eval";
+  CaptureEvalSummary s;
+  WriteCaptureEval(dir, s);
+  EXPECT_EQ(ReadFileToString(dir / "eval.json"), s.ToJson() + "\n");
+  EXPECT_EQ(ReadFileToString(dir / "eval.md"), s.ToMarkdown());
+  EXPECT_EQ(ReadFileToString(dir / "eval_frames.csv"), s.ToCsv());
+  EXPECT_FALSE(std::filesystem::exists(dir / "error_vectors.png"));
+  s.error_vectors = cv::Mat(12, 16, CV_8UC3, cv::Scalar(10, 200, 30));
+  s.error_vectors_frame = 3;
+  WriteCaptureEval(dir, s);
+  const cv::Mat png = ReadImage(dir / "error_vectors.png", /*srgb=*/false);
+  ASSERT_EQ(png.size(), cv::Size(16, 12));
+  EXPECT_NEAR(png.at<cv::Vec3f>(5, 7)[1], 200.0f / 255.0f, 1e-6);
 }
 
 }  // namespace

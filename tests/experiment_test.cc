@@ -18,6 +18,7 @@
 #include <unistd.h>
 
 #include "core/error.h"
+#include "tests/test_util.h"
 #include "core/json_io.h"
 #include "core/options.h"
 #include "pipeline/capture/capture.h"
@@ -154,6 +155,25 @@ TEST(Experiment, ParsesAConfigAndExpandsAListSweepOverSeeds) {
   // A list sweep varies one key at a time: the others keep their base value.
   EXPECT_EQ(runs[4].resolved.sections.at("training").at("ferns.num_ferns"), 1280);
   EXPECT_EQ(runs[0].resolved.sections.at("training").at("ferns.num_ferns"), 80);
+}
+
+// `crease experiment list` and `run NAME`: ORDER's names first (unknown ones
+// skipped), then the other configs by name; a name resolves to DIR/NAME.yaml or an
+// existing file, else the error lists the known names.
+TEST(Experiment, ConfigsListInTheOrderFileThenByName) {
+  const fs::path dir = testing::TestDir();
+  for (const char* n : {"alpha", "beta", "gamma", "delta"}) testing::WriteText(dir / (std::string(n) + ".yaml"), "");
+  testing::WriteText(dir / "README.md", "");
+  testing::WriteText(dir / "ORDER", "gamma\nmissing alpha\n");
+  const std::vector<fs::path> configs = ListExperimentConfigs(dir);
+  const std::vector<fs::path> expected = {dir / "gamma.yaml", dir / "alpha.yaml", dir / "beta.yaml",
+                                          dir / "delta.yaml"};
+  EXPECT_EQ(configs, expected);
+  EXPECT_EQ(ResolveExperimentConfig("beta", dir), dir / "beta.yaml");
+  EXPECT_EQ(ResolveExperimentConfig((dir / "README.md").string(), dir), dir / "README.md");
+  EXPECT_ERROR_HAS(ResolveExperimentConfig("omega", dir),
+                   "experiment 'omega': no such config file or experiment (known: gamma, alpha, beta, delta, all)");
+  EXPECT_ERROR_HAS(ListExperimentConfigs(dir / "none"), "no experiments folder");
 }
 
 TEST(Experiment, GridSweepIsTheCartesianProduct) {

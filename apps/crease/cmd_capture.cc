@@ -12,7 +12,6 @@
 #include "core/error.h"
 #include "core/face_rig.h"
 #include "core/file_util.h"
-#include "core/image_io.h"
 #include "core/options.h"
 #include "eval/capture_metrics.h"
 #include "pipeline/capture/capture.h"
@@ -115,25 +114,12 @@ void RunEvalCommand(const EvalArgs& a) {
   if (!a.sets.empty()) SetOptionsFromJson(SetPairsToJson(a.sets), "--set", &options);
   const CaptureEvalSummary s = EvaluateCapture(a.capture_dir, a.dataset_dir, options);
   const fs::path dir = a.out.empty() ? fs::path(a.capture_dir) : fs::path(a.out);
-  fs::create_directories(dir);
-  const std::string md = s.ToMarkdown(), js = s.ToJson(), csv = s.ToCsv();
-  auto text = [](const std::string& t) {
-    return [&t](const fs::path& tmp) { WriteFileAtomic(tmp, [&](std::ostream& o) { o << t; }); };
-  };
-  const std::string js_line = js + "\n";
-  // All or nothing: a failed write left eval.json beside an older eval_frames.csv.
-  std::vector<PendingFile> files = {{dir / "eval_frames.csv", text(csv)}, {dir / "eval.md", text(md)}};
-  if (!s.error_vectors.empty()) {  // Fig. 11
-    files.push_back({dir / "error_vectors.png",
-                     [&](const fs::path& tmp) { WriteImage(tmp, s.error_vectors, {.srgb = false}); }});
-  }
-  files.push_back({dir / "eval.json", text(js_line)});
-  WriteFilesAtomic(files);
+  WriteCaptureEval(dir, s);
   if (!s.error_vectors.empty()) {
     std::printf("wrote %s (frame %d: 2D error vectors of L^t and L~^t)\n",
                 (dir / "error_vectors.png").string().c_str(), s.error_vectors_frame);
   }
-  std::printf("%s\nwrote %s/eval.{md,json} and eval_frames.csv\n", md.c_str(), dir.string().c_str());
+  std::printf("%s\nwrote %s/eval.{md,json} and eval_frames.csv\n", s.ToMarkdown().c_str(), dir.string().c_str());
 }
 
 void AddEvalCommand(CLI::App& app) {

@@ -3,11 +3,9 @@
 // over a results folder), issue 7.
 #include <unistd.h>
 
-#include <algorithm>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <memory>
 
 #include <fmt/format.h>
@@ -33,37 +31,9 @@ fs::path SourceDir() {
 
 fs::path ExperimentsDir() { return SourceDir() / "experiments"; }
 
-// The configs of experiments/ in the order of experiments/ORDER (the README's
-// order), then any others by name.
-std::vector<fs::path> ListConfigs() {
-  const fs::path dir = ExperimentsDir();
-  Require(fs::is_directory(dir), fmt::format("{}: no experiments folder (set CREASE_SOURCE_DIR to the crease "
-                                             "source tree)", dir.string()));
-  std::vector<fs::path> all;
-  for (const auto& e : fs::directory_iterator(dir))
-    if (e.path().extension() == ".yaml") all.push_back(e.path());
-  std::sort(all.begin(), all.end());
-  std::vector<fs::path> ordered;
-  std::ifstream order(dir / "ORDER");
-  std::string name;
-  while (order >> name) {
-    const fs::path p = dir / (name + ".yaml");
-    if (std::find(all.begin(), all.end(), p) != all.end()) ordered.push_back(p);
-  }
-  for (const auto& p : all)
-    if (std::find(ordered.begin(), ordered.end(), p) == ordered.end()) ordered.push_back(p);
-  return ordered;
-}
+std::vector<fs::path> ListConfigs() { return ListExperimentConfigs(ExperimentsDir()); }
 
-fs::path ResolveConfig(const std::string& name) {
-  if (fs::exists(name) && fs::is_regular_file(name)) return name;
-  const fs::path p = ExperimentsDir() / (name + ".yaml");
-  if (fs::exists(p)) return p;
-  std::vector<std::string> names;
-  for (const auto& c : ListConfigs()) names.push_back(c.stem().string());
-  throw Error(fmt::format("experiment '{}': no such config file or experiment (known: {}, all)", name,
-                          fmt::join(names, ", ")));
-}
+fs::path ResolveConfig(const std::string& name) { return ResolveExperimentConfig(name, ExperimentsDir()); }
 
 fs::path SelfPath() {
   std::error_code ec;

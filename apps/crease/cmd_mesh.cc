@@ -10,6 +10,7 @@
 #include "core/error.h"
 #include "core/file_util.h"
 #include "core/image_io.h"
+#include "core/mesh_info.h"
 #include "core/mesh_io.h"
 #include "core/mesh_ops.h"
 #include "core/preview_render.h"
@@ -31,27 +32,9 @@ TriMesh ReadMeshFile(const std::string& path, std::vector<VertexField>* fields) 
   return ReadAnyMesh(path);
 }
 
+// `mesh info --json`: the mesh's summary and its per-vertex fields.
 nlohmann::json MeshInfo(const fs::path& path, const TriMesh& mesh, const std::vector<VertexField>& fields) {
-  const auto [lo, hi] = BoundingBox(mesh);
-  const EdgeStats e = ComputeEdgeStats(mesh);
-  nlohmann::json j;
-  j["file"] = path.string();
-  j["vertices"] = mesh.num_vertices();
-  j["triangles"] = mesh.num_faces();
-  j["has_uv"] = mesh.has_uv();
-  j["has_normals"] = mesh.has_normals();
-  j["bbox_min_mm"] = {lo.x(), lo.y(), lo.z()};
-  j["bbox_max_mm"] = {hi.x(), hi.y(), hi.z()};
-  j["extent_mm"] = {hi.x() - lo.x(), hi.y() - lo.y(), hi.z() - lo.z()};
-  j["surface_area_mm2"] = TriangleAreas(mesh).sum();
-  j["mean_edge_length_mm"] = MeanEdgeLength(mesh);
-  j["edges"] = e.edges;
-  j["boundary_edges"] = e.boundary;
-  j["non_manifold_edges"] = e.non_manifold;
-  if (mesh.has_uv()) {
-    j["uv_min"] = {mesh.UV.col(0).minCoeff(), mesh.UV.col(1).minCoeff()};
-    j["uv_max"] = {mesh.UV.col(0).maxCoeff(), mesh.UV.col(1).maxCoeff()};
-  }
+  nlohmann::json j = MeshInfoJson(mesh, path.string());
   nlohmann::json f = nlohmann::json::array();
   for (const auto& field : fields) f.push_back({{"name", field.name}, {"components", field.values.cols()}});
   j["fields"] = f;

@@ -45,26 +45,8 @@ void ApplyUserOptions(const TrainArgs& a, TrainingOptions* options) {
   if (!a.sets.empty()) SetOptionsFromJson(SetPairsToJson(a.sets), "--set", options);
 }
 
-// The report folder: --report, else <out without extension>_report. It is replaced
-// as a whole, so an existing folder must be empty or an earlier report.
-fs::path ReportDir(const TrainArgs& a) {
-  const fs::path out_path(a.out.empty() ? a.pairs_out : a.out);
-  const fs::path dir =
-      a.report.empty() ? out_path.parent_path() / (out_path.stem().string() + "_report") : fs::path(a.report);
-  std::error_code ec;
-  Require(!fs::is_directory(dir, ec) || fs::is_empty(dir, ec) || fs::is_regular_file(dir / "report.json", ec),
-          fmt::format("{}: exists and is not a training report (no report.json); the report replaces its "
-                      "folder, so choose another --report",
-                      dir.string()));
-  return dir;
-}
-
-void WriteTrainingReport(const fs::path& report_dir, const TrainingSummary& summary) {
-  WriteFileAtomic(report_dir / "report.json", [&](std::ostream& o) { o << summary.ToJson(); });
-  const std::string md = summary.ToMarkdown();
-  WriteFileAtomic(report_dir / "report.md", [&](std::ostream& o) { o << md; });
-  std::printf("\n%s\n", md.c_str());
-}
+// The report folder: --report, else <out without extension>_report.
+fs::path ReportDir(const TrainArgs& a) { return TrainingReportDir(a.out.empty() ? a.pairs_out : a.out, a.report); }
 
 void PrintProgressLine(const std::string& l) { std::printf("  %s\n", l.c_str()); }
 
@@ -81,7 +63,7 @@ void TrainFromPairs(const TrainArgs& a) {
   // The report is written under a temporary name (a killed run leaves no partial report).
   WriteFolderAtomic(report_dir, /*overwrite=*/true, [&](const fs::path& report) {
     model = TrainDetailModelFromPairs(pairs, options, {report}, &summary, PrintProgressLine);
-    WriteTrainingReport(report, summary);
+    std::printf("\n%s\n", WriteTrainingReport(report, summary).c_str());
   });
   WriteDetailModel(a.out.empty() ? a.pairs_out : a.out, model);
   std::printf("wrote %s and the report in %s\n", a.out.c_str(), report_dir.string().c_str());
@@ -115,7 +97,7 @@ void TrainFromScans(TrainArgs& a) {
       // The compatible rig (Sec. 4.1) for inspection; capture derives it from the model's G.
       WriteRig(report / "compatible_rig.crig", MakeRigCompatible(rig, model->detail));
     }
-    WriteTrainingReport(report, summary);
+    std::printf("\n%s\n", WriteTrainingReport(report, summary).c_str());
   });
   if (!model) return;
   WriteDetailModel(a.out, *model);

@@ -112,6 +112,16 @@ struct TrainingSummary {
   std::string ToJson() const;
 };
 
+// The report folder of a training run (`crease train`): `report` when given, else
+// <model without extension>_report beside `model`. A report replaces its folder as
+// a whole, so an existing folder must be empty or an earlier report (with
+// report.json); otherwise throws Error naming the folder.
+std::filesystem::path TrainingReportDir(const std::filesystem::path& model, const std::filesystem::path& report);
+
+// Writes REPORT_DIR/report.json (summary.ToJson()) and REPORT_DIR/report.md
+// (summary.ToMarkdown()), each atomically; returns the Markdown.
+std::string WriteTrainingReport(const std::filesystem::path& report_dir, const TrainingSummary& summary);
+
 // Report artefacts (pictures) the trainer can write while it runs; an empty
 // folder writes none.
 struct TrainingOutputs {
