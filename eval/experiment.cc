@@ -745,6 +745,8 @@ void PlanCaptureStages(RunPlan& p, const ExperimentStage& model, const Experimen
           a.insert(a.end(), {"--landmarks", "dlib"});
         } else if (d.landmarks == ExperimentLandmarks::kGroundTruthFit) {
           a.push_back("--ground-truth-fit");
+        } else if (d.landmarks == ExperimentLandmarks::kGroundTruthSurface) {
+          a.push_back("--ground-truth-surface");
         } else {
           a.insert(a.end(), {"--ground-truth-prior", "--noise", fmt::format("{}", d.landmark_noise_px)});
         }

@@ -53,9 +53,11 @@
 namespace crease {
 
 // ExperimentDataset::landmarks: the capture's landmark source (a `crease capture` flag).
-enum class ExperimentLandmarks { kRegressor, kDlib, kGroundTruthPrior, kGroundTruthFit };
-constexpr std::array<const char*, 4> OptionEnumNames(ExperimentLandmarks) {
-  return {"regressor", "dlib", "ground-truth-prior", "ground-truth-fit"};
+// ground-truth-fit keeps the actor's personal deviations as model error (the
+// refinement's control); ground-truth-surface is the true coarse surface (exact geometry).
+enum class ExperimentLandmarks { kRegressor, kDlib, kGroundTruthPrior, kGroundTruthFit, kGroundTruthSurface };
+constexpr std::array<const char*, 5> OptionEnumNames(ExperimentLandmarks) {
+  return {"regressor", "dlib", "ground-truth-prior", "ground-truth-fit", "ground-truth-surface"};
 }
 // ExperimentDataset::patch_sites (see there).
 enum class PatchSites { kOwn, kTruth };

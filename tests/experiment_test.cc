@@ -305,7 +305,7 @@ dataset: {leave_one_actor_out: true, test_actors: 1}
 variants:
   rung:
     R0b: {training.training_targets: truth, dataset.capture: false}
-    R1: {dataset.landmarks: ground-truth-fit, dataset.patch_sites: truth}
+    R1: {dataset.landmarks: ground-truth-surface, dataset.patch_sites: truth}
     R3: {dataset.landmarks: regressor}
   size:
     small: {studio.width: 320, studio.height: 240}
@@ -346,7 +346,7 @@ TEST(Experiment, VariantsSweepBundlesOfSettingsAndTheLadderPlansItsRungs) {
   EXPECT_NE(std::find(capture->depends.begin(), capture->depends.end(), maps->key), capture->depends.end());
   const std::string wrinkle_maps = "wrinkle_map_from_maps=" + (maps->dir / "maps").string();
   EXPECT_NE(std::find(capture->argv.begin(), capture->argv.end(), wrinkle_maps), capture->argv.end());
-  EXPECT_NE(std::find(capture->argv.begin(), capture->argv.end(), "--ground-truth-fit"), capture->argv.end());
+  EXPECT_NE(std::find(capture->argv.begin(), capture->argv.end(), "--ground-truth-surface"), capture->argv.end());
   // R3: the tracker, no truth maps; its loao stage is R1's (same pairs, same options).
   const auto r3 = PlanRunStages(runs[2], cache, "1");
   EXPECT_EQ(FindStage(r3, "truth-maps"), nullptr);

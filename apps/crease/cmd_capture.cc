@@ -56,11 +56,12 @@ void RunCaptureCommand(CaptureArgs& a) {
   const CameraIntrinsics K = ResolveIntrinsics(tf.camera_path, info, tf.fov);
   const DetailModel model = ReadDetailModel(a.model_path);
   auto t0 = std::chrono::steady_clock::now();
-  const FaceRig rig = CompatibleRig(ReadRig(tf.rig_path), model);
+  const fs::path dataset_dir = dataset ? info.path : fs::path();
+  const FaceRig rig = CompatibleRig(ControlRig(ReadRig(tf.rig_path), tf.Control(), dataset_dir), model);
   const double rig_s = SecondsSince(t0);
   std::printf("rig made compatible with the model's lowpass (Sec. 4.1) in %.1f s\n", rig_s);
   t0 = std::chrono::steady_clock::now();
-  FrameTracker tracker(rig, K, options.tracker, tf.Control(), dataset ? info.path : fs::path());
+  FrameTracker tracker(rig, K, options.tracker, tf.Control(), dataset_dir);
   CaptureSession session(rig, model, K, options);
   const double setup_s = SecondsSince(t0);
   std::printf("capture set up (UV raster, geodesics, stencils) in %.1f s\n", setup_s);
@@ -90,6 +91,9 @@ void AddCaptureCommand(CLI::App& app) {
   cmd->add_flag("--ground-truth-fit", a->tf.gt_fit,
                 "Experimental control: the dataset's true pose, expression weights and identity as the tracker's fit "
                 "(exact geometry up to the actor's personal deviations), to isolate the detail path; never a default");
+  cmd->add_flag("--ground-truth-surface", a->tf.gt_surface,
+                "Experimental control: --ground-truth-fit on the actor's own expression shapes, so that L^t is the "
+                "true coarse surface (no model error); never a default");
   cmd->add_option("--model,-m", a->model_path, "Detail model (.cdm, from `crease train`)")->required();
   cmd->add_option("--out,-o", a->out, "Output folder (written under a temporary name, renamed when complete)")->required();
   cmd->add_option("--preview", a->preview, "Preview video (.avi: MJPG, .mp4: mp4v): the frame with L~^t beside D^t");
