@@ -16,6 +16,7 @@
 #include "synth/dataset.h"
 #include "synth/procedural_rig.h"
 #include "tests/synth_test_util.h"
+#include "tests/training_test_util.h"
 #include "tests/test_util.h"
 
 namespace crease {
@@ -26,44 +27,8 @@ using testing::WriteText;
 
 const FaceRig& Rig() { return testing::ProceduralRig(); }
 
-// One old actor (deep wrinkles), a neutral and a brow raise, at 256² maps: written once.
-const fs::path& TinyScans() {
-  static const fs::path dir = [] {
-    const fs::path d = testing::FixtureDir("trainer_tiny_scans");
-    ActorOptions ao;
-    ao.resolution = 256;
-    ao.surface_min_vertices = 1000;
-    ao.age_min = ao.age_max = 1.0;  // many deep lines
-    // The rig's own expressions: the bounds below test extraction on scans the rig
-    // fits exactly. With the default personal deviations (σ 0.3, 40 mm) the
-    // rig-fit residual leaks into D^j: forehead band correlation 0.56, RMSE 0.027 mm
-    // against a true RMS of 0.019 mm (issue 17).
-    ao.expression_deviation = 0.0;
-    ScanSetOptions so;
-    so.studio.width = 320;
-    so.studio.height = 240;
-    so.studio.samples_per_axis = 1;
-    so.cameras = 2;
-    so.expressions = {"browInnerUp=1,browOuterUp=1"};
-    so.overwrite = true;
-    WriteScanSet(Rig(), {11}, ao, so, d);
-    return d;
-  }();
-  return dir;
-}
-
-TrainingOptions TinyOptions() {
-  TrainingOptions o;
-  o.detail.map_resolution = 256;
-  o.detail.operator_resolution = 96;
-  o.patch.patch_size = 8;
-  o.pca.dimensions = 6;
-  o.ferns.num_ferns = 40;
-  o.ferns.num_sampled_pixels = 20;
-  o.ferns.shrinkage = 10;
-  o.fit.max_fit_vertices = 400;
-  return o;
-}
+using testing::TinyScans;
+using testing::TinyTrainingOptions;
 
 TEST(Trainer, ExtractsTheStudiosWrinklesAndTrainsAModel) {
   const ScanSet set = ReadScanSet(TinyScans());
@@ -71,7 +36,7 @@ TEST(Trainer, ExtractsTheStudiosWrinklesAndTrainsAModel) {
   ASSERT_EQ(set.num_scans(), 2);
   const fs::path dir = testing::TestDir();
   TrainingSummary summary;
-  const DetailModel model = TrainDetailModel(set, Rig(), TinyOptions(), {dir / "report"}, &summary);
+  const DetailModel model = TrainDetailModel(set, Rig(), TinyTrainingOptions(), {dir / "report"}, &summary);
   // The rig fits the studio's own scans to well under a millimetre.
   ASSERT_EQ(summary.actors.size(), 1u);
   EXPECT_EQ(summary.actors[0].correspondence, "uv");
@@ -150,7 +115,7 @@ TEST(Trainer, ScansWithoutTheRigsUvs) {
   }
   const ScanSet set = ReadScanSet(dir / "scans");
   TrainingSummary summary;
-  TrainingOptions o = TinyOptions();
+  TrainingOptions o = TinyTrainingOptions();
   o.fit.max_correspondence_mm = 15.0;
   const DetailModel model = TrainDetailModel(set, Rig(), o, {}, &summary);
   EXPECT_EQ(summary.actors[0].correspondence, "closest");
@@ -176,7 +141,7 @@ TEST(Trainer, ScansWithoutTheRigsUvs) {
 TEST(Trainer, SameInputsSameModelBytes) {
   const ScanSet set = ReadScanSet(TinyScans());
   const fs::path dir = testing::TestDir();
-  TrainingOptions o = TinyOptions();
+  TrainingOptions o = TinyTrainingOptions();
   o.ferns.num_ferns = 10;
   WriteDetailModel(dir / "a.cdm", TrainDetailModel(set, Rig(), o, {}, nullptr));
   WriteDetailModel(dir / "b.cdm", TrainDetailModel(set, Rig(), o, {}, nullptr));
@@ -189,7 +154,7 @@ TEST(Trainer, SameInputsSameModelBytes) {
 TEST(Trainer, SavedPairsRetrainTheSameRegressorAndRefuseOtherExtraction) {
   const ScanSet set = ReadScanSet(TinyScans());
   const fs::path dir = testing::TestDir();
-  TrainingOptions o = TinyOptions();
+  TrainingOptions o = TinyTrainingOptions();
   o.ferns.num_ferns = 10;
   o.pca.dimensions = 6;
   const TrainingPairs pairs = ExtractTrainingPairs(set, Rig(), o, {}, nullptr);

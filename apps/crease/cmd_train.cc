@@ -1,17 +1,13 @@
 // `crease train` (paper Sec. 4) and `crease model info`.
 #include <cstdio>
 #include <filesystem>
-#include <fmt/format.h>
-#include <fmt/ranges.h>
 #include <fstream>
 #include <memory>
-#include <optional>
 #include <string>
 #include <vector>
 
 #include "apps/crease/commands.h"
 #include "core/error.h"
-#include "core/face_rig.h"
 #include "core/file_util.h"
 #include "core/options.h"
 #include "core/progress.h"
@@ -19,6 +15,7 @@
 #include "eval/pair_metrics.h"
 #include "pipeline/training/detail_model.h"
 #include "pipeline/training/trainer.h"
+#include "pipeline/training/training_run.h"
 
 namespace crease::app {
 
@@ -45,63 +42,19 @@ void ApplyUserOptions(const TrainArgs& a, TrainingOptions* options) {
   if (!a.sets.empty()) SetOptionsFromJson(SetPairsToJson(a.sets), "--set", options);
 }
 
-// The report folder: --report, else <out without extension>_report.
-fs::path ReportDir(const TrainArgs& a) { return TrainingReportDir(a.out.empty() ? a.pairs_out : a.out, a.report); }
-
 void PrintProgressLine(const std::string& l) { std::printf("  %s\n", l.c_str()); }
 
-// train --pairs: the PCA and the cascade (Sec. 4.3) from saved pairs.
-void TrainFromPairs(const TrainArgs& a) {
-  const fs::path report_dir = ReportDir(a);
-  const TrainingPairs pairs = ReadTrainingPairs(PairFiles(a.pairs_in));
-  const TrainingOptions options =
-      OptionsForPairs(pairs, a.pairs_in, [&a](TrainingOptions* o) { ApplyUserOptions(a, o); });
-  std::printf("training the PCA and the cascade on %lld pairs of %s\n", static_cast<long long>(pairs.texture.rows()),
-              a.pairs_in.c_str());
-  TrainingSummary summary;
-  DetailModel model;
-  // The report is written under a temporary name (a killed run leaves no partial report).
-  WriteFolderAtomic(report_dir, /*overwrite=*/true, [&](const fs::path& report) {
-    model = TrainDetailModelFromPairs(pairs, options, {report}, &summary, PrintProgressLine);
-    std::printf("\n%s\n", WriteTrainingReport(report, summary).c_str());
-  });
-  WriteDetailModel(a.out.empty() ? a.pairs_out : a.out, model);
-  std::printf("wrote %s and the report in %s\n", a.out.c_str(), report_dir.string().c_str());
-}
-
-// train --scans: extraction (Sec. 4.1–4.2), then the PCA and the cascade unless only pairs are asked for.
-void TrainFromScans(TrainArgs& a) {
-  const fs::path report_dir = ReportDir(a);
-  TrainingOptions options;
-  ApplyUserOptions(a, &options);
-  const ScanSet set = ReadScanSet(a.scans);
-  if (a.rig_path.empty()) {
-    Require(!set.rig.empty(), fmt::format("{}: the scan set names no rig; give --rig", a.scans));
-    a.rig_path = set.rig.string();
-  }
-  const FaceRig rig = ReadRig(a.rig_path);
-  std::printf("training on %s: %zu actors, %d scans, lights: %s\n", a.scans.c_str(), set.actors.size(),
-              set.num_scans(), fmt::format("{}", fmt::join(set.lights(), ", ")).c_str());
-  TrainingSummary summary;
-  std::optional<DetailModel> model;
-  // The report is written under a temporary name (a killed run leaves no partial report).
-  WriteFolderAtomic(report_dir, /*overwrite=*/true, [&](const fs::path& report) {
-    const TrainingPairs pairs = ExtractTrainingPairs(set, rig, options, {report}, &summary, PrintProgressLine);
-    if (!a.pairs_out.empty()) {
-      WriteTrainingPairs(a.pairs_out, pairs);
-      std::printf("wrote %lld training pairs to %s\n", static_cast<long long>(pairs.texture.rows()),
-                  a.pairs_out.c_str());
-    }
-    if (!a.out.empty()) {
-      model = TrainDetailModelFromPairs(pairs, options, {report}, &summary, PrintProgressLine);
-      // The compatible rig (Sec. 4.1) for inspection; capture derives it from the model's G.
-      WriteRig(report / "compatible_rig.crig", MakeRigCompatible(rig, model->detail));
-    }
-    std::printf("\n%s\n", WriteTrainingReport(report, summary).c_str());
-  });
-  if (!model) return;
-  WriteDetailModel(a.out, *model);
-  std::printf("wrote %s and the report in %s\n", a.out.c_str(), report_dir.string().c_str());
+// train --scans or --pairs: the job (pipeline/training/training_run.h), with its lines printed.
+void RunTrainCommand(const TrainArgs& a) {
+  TrainingRunOptions run;
+  run.scans = a.scans;
+  run.pairs = PairFiles(a.pairs_in);
+  run.rig = a.rig_path;
+  run.out = a.out;
+  run.save_pairs = a.pairs_out;
+  run.report = a.report;
+  RunTraining(run, [&a](TrainingOptions* o) { ApplyUserOptions(a, o); },
+              [](const std::string& line) { std::printf("%s\n", line.c_str()); });
 }
 
 void AddTrainCommand(CLI::App& app) {
@@ -124,11 +77,7 @@ void AddTrainCommand(CLI::App& app) {
     if (a->scans.empty() == a->pairs_in.empty()) throw Error("train: give --scans (a scan set) or --pairs (saved pairs)");
     if (a->out.empty() && a->pairs_out.empty()) throw Error("train: give --out (the model) and/or --save-pairs");
     Require(a->pairs_in.empty() || a->pairs_out.empty(), "train: --save-pairs needs --scans");
-    if (!a->pairs_in.empty()) {
-      TrainFromPairs(*a);
-    } else {
-      TrainFromScans(*a);
-    }
+    RunTrainCommand(*a);
   });
 }
 
