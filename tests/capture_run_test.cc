@@ -5,11 +5,13 @@
 // tracked and lost frames, frames with D^t, the steady-state speed and its split.
 // The model is valid, not good: its wrinkle map, layout, PCA and cascade are fitted
 // to noise textures (the run's bookkeeping is under test, not the regression).
+// The last case runs the job from files (eval/capture_job.h) with the ground-truth fit.
 #include "pipeline/capture/capture_run.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -25,6 +27,7 @@
 #include "core/file_util.h"
 #include "core/json_io.h"
 #include "core/options.h"
+#include "eval/capture_job.h"
 #include "eval/tracking_metrics.h"
 #include "pipeline/training/patches.h"
 #include "pipeline/training/wrinkle_map.h"
@@ -341,6 +344,51 @@ TEST(CaptureRun, NoFramesIsAnError) {
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("the-input: no frames"), std::string::npos) << e.what();
   }
+  EXPECT_FALSE(fs::exists(run.out));
+}
+
+// The job `crease capture` runs from files (eval/capture_job.h): the rig defaults to
+// the dataset's tracking rig, the camera to its calibration, the ground-truth fit
+// tracks every frame, and the set-up the job times is what capture.json records.
+TEST(CaptureRun, FromFilesTracksWithTheDatasetsRigAndRecordsTheSetUp) {
+  const fs::path dataset = TinySequence();
+  const fs::path root = testing::FixtureDir("capture_from_files");
+  fs::create_directories(root);
+  CaptureFiles files;
+  files.input = dataset.string();
+  files.model = (root / "noise.cdm").string();
+  WriteDetailModel(files.model, NoiseModel());
+  files.control.ground_truth_fit = true;
+  CaptureRunOptions run;
+  run.out = root / "cap";
+  run.max_frames = 3;
+  run.write_meshes = false;
+  run.setup_s = -1.0;  // replaced by the job's own set-up time
+  std::vector<std::string> lines;
+  const CaptureSummary s =
+      CaptureFromFiles(files, TinyCaptureOptions(), run, [&](const std::string& l) { lines.push_back(l); });
+
+  EXPECT_EQ(s.input, files.input);
+  EXPECT_EQ(s.model, files.model);
+  EXPECT_EQ(s.source_rig, DatasetTrackingRig(dataset));
+  EXPECT_EQ(s.landmark_source, "ground-truth-fit");
+  EXPECT_EQ(s.frames, 3);
+  EXPECT_EQ(s.tracked_frames, 3);
+  EXPECT_EQ(s.detail_frames, 3);
+  // The two set-up lines, whose times (0.1 s rounding) add up to the recorded set-up.
+  ASSERT_EQ(lines.size(), 2u);
+  double rig_s = -1, session_s = -1;
+  ASSERT_EQ(std::sscanf(lines[0].c_str(), "rig made compatible with the model's lowpass (Sec. 4.1) in %lf s", &rig_s), 1)
+      << lines[0];
+  ASSERT_EQ(std::sscanf(lines[1].c_str(), "capture set up (UV raster, geodesics, stencils) in %lf s", &session_s), 1)
+      << lines[1];
+  EXPECT_GT(s.setup_s, 0.0);
+  EXPECT_NEAR(s.setup_s, rig_s + session_s, 0.1 + 1e-9);
+  EXPECT_DOUBLE_EQ(ReadJsonFile(s.capture_json)["setup_s"].get<double>(), s.setup_s);
+  // A rig that is not there: an error naming it, and no folder.
+  files.rig = (root / "missing.crig").string();
+  run.out = root / "cap2";
+  EXPECT_ERROR_HAS(CaptureFromFiles(files, TinyCaptureOptions(), run), "missing.crig");
   EXPECT_FALSE(fs::exists(run.out));
 }
 

@@ -1,6 +1,5 @@
 // `crease capture` (paper Sec. 5: online capture from a video to H^t) and
 // `crease eval` (its metrics against a studio sequence's ground truth), issue 6.
-#include <chrono>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -10,14 +9,12 @@
 #include "apps/crease/commands.h"
 #include "apps/crease/track_util.h"
 #include "core/error.h"
-#include "core/face_rig.h"
 #include "core/file_util.h"
 #include "core/options.h"
+#include "eval/capture_job.h"
 #include "eval/capture_metrics.h"
 #include "pipeline/capture/capture.h"
 #include "pipeline/capture/capture_run.h"
-#include "pipeline/capture/frame_source.h"
-#include "pipeline/training/detail_model.h"
 
 namespace crease::app {
 
@@ -34,13 +31,8 @@ struct CaptureArgs {
   std::vector<std::string> sets;
 };
 
-// Seconds since `t0` (the set-up times `crease capture` prints).
-double SecondsSince(std::chrono::steady_clock::time_point t0) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
-void RunCaptureCommand(CaptureArgs& a) {
-  TrackingFlags& tf = a.tf;
+void RunCaptureCommand(const CaptureArgs& a) {
+  const TrackingFlags& tf = a.tf;
   CaptureOptions options;
   options.tracker.landmark_source = tf.tracker_model.empty() ? FromString<LandmarkSourceKind>(tf.landmarks, "--landmarks")
                                                              : LandmarkSourceKind::kRegressor;
@@ -49,23 +41,13 @@ void RunCaptureCommand(CaptureArgs& a) {
   if (!a.sets.empty()) SetOptionsFromJson(SetPairsToJson(a.sets), "--set", &options);
   options.Check();
   Require(a.mesh_every >= 1, "--mesh-every must be at least 1");
-  auto frames = OpenFrameSource(tf.input);
-  const FrameSourceInfo& info = frames->info();
-  const bool dataset = info.kind == "dataset";
-  tf.rig_path = TrackingRigPath(tf.rig_path, info);
-  const CameraIntrinsics K = ResolveIntrinsics(tf.camera_path, info, tf.fov);
-  const DetailModel model = ReadDetailModel(a.model_path);
-  auto t0 = std::chrono::steady_clock::now();
-  const fs::path dataset_dir = dataset ? info.path : fs::path();
-  const FaceRig rig = CompatibleRig(ControlRig(ReadRig(tf.rig_path), tf.Control(), dataset_dir), model);
-  const double rig_s = SecondsSince(t0);
-  std::printf("rig made compatible with the model's lowpass (Sec. 4.1) in %.1f s\n", rig_s);
-  t0 = std::chrono::steady_clock::now();
-  FrameTracker tracker(rig, K, options.tracker, tf.Control(), dataset_dir);
-  CaptureSession session(rig, model, K, options);
-  const double setup_s = SecondsSince(t0);
-  std::printf("capture set up (UV raster, geodesics, stencils) in %.1f s\n", setup_s);
-
+  CaptureFiles files;
+  files.input = tf.input;
+  files.model = a.model_path;
+  files.rig = tf.rig_path;
+  files.camera = tf.camera_path;
+  files.fov_deg = tf.fov;
+  files.control = tf.Control();
   CaptureRunOptions run;
   run.out = a.out;
   run.overwrite = a.overwrite;
@@ -75,11 +57,8 @@ void RunCaptureCommand(CaptureArgs& a) {
   run.write_meshes = !a.no_meshes;
   run.write_maps = !a.no_maps;
   run.write_textures = a.write_textures;
-  run.input = tf.input;
-  run.model_path = a.model_path;
-  run.source_rig = tf.rig_path;
-  run.setup_s = setup_s + rig_s;
-  const CaptureSummary summary = RunCapture(run, options, model, K, frames.get(), &tracker, &session);
+  const CaptureSummary summary =
+      CaptureFromFiles(files, options, run, [](const std::string& line) { std::printf("%s\n", line.c_str()); });
   std::printf("%s", summary.BriefReport().c_str());
   std::printf("wrote %s\n", a.out.c_str());
 }
