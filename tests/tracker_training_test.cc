@@ -6,7 +6,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
+#include <filesystem>
+#include <vector>
+
+#include <fmt/format.h>
 
 #include <nlohmann/json.hpp>
 
@@ -89,6 +94,53 @@ TEST(TrackerTraining, RefusesTooFewFaces) {
   EXPECT_NE(ErrorOf([&] { TrainAndEvaluateTracker(ToyFaces(MakeToy(2, 2), "x"), {}, TinyTrackerOptions()); })
                 .find("must not be empty"),
             std::string::npos);
+}
+
+// `crease eval-landmarks`' report (EvaluateLandmarks): a source per cold start and the
+// regressor's two initialisations, reported as the evaluations computed them.
+TEST(TrackerTraining, LandmarkEvaluationReportsTheEvaluationsItRan) {
+  const TrainedTracker t = TrainTrackerOnFaces(ToyFaces(MakeToy(12, 3), "a"), TinyTrackerOptions());
+  const std::vector<LabelledFace> faces = ToyFaces(MakeToy(4, 4), "b");
+  const LandmarkEvaluationReport r = EvaluateLandmarks(faces, "toys", /*dlib=*/false, &t.regressor, 5);
+  EXPECT_EQ(r.faces, 4);
+  ASSERT_EQ(r.sources.size(), 1u);
+  ASSERT_TRUE(r.has_regressor);
+  // The same seed, the same draws: the report holds EvaluateShapeRegressor's numbers.
+  const ShapeRegressorEvaluation e = EvaluateShapeRegressor(t.regressor, faces, 5, 0);
+  EXPECT_EQ(r.regressor.tracking.final_iod, e.tracking.final_iod);
+  EXPECT_EQ(r.regressor.box.initial_px, e.box.initial_px);
+  const nlohmann::json j = nlohmann::json::parse(r.ToJson());
+  EXPECT_EQ(j["data"], "toys");
+  EXPECT_EQ(j["faces"], 4);
+  const std::string source = r.sources[0].source;
+  EXPECT_EQ(j[source]["found"], r.sources[0].found);
+  EXPECT_EQ(j[source]["error_px"].get<double>(), r.sources[0].error_px);
+  EXPECT_EQ(j["regressor_tracking_init"]["final_iod"].get<double>(), e.tracking.final_iod);
+  EXPECT_EQ(j["regressor_box_init"]["initial_px"].get<double>(), e.box.initial_px);
+  EXPECT_FALSE(j["regressor_box_init"].contains("frames"));
+  EXPECT_FALSE(j.contains("dlib"));
+  // One line per source, then the regressor's.
+  const std::string text = r.ToText();
+  EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 2) << text;
+  EXPECT_EQ(text.rfind(fmt::format("{:<10} cold start (detector, then landmarks): found {} of 4 faces", source,
+                                   r.sources[0].found),
+                       0),
+            0u)
+      << text;
+  EXPECT_NE(text.find(fmt::format("regressor  from the perturbed truth: {:.3f} -> {:.3f} IOD", e.tracking.initial_iod,
+                                  e.tracking.final_iod)),
+            std::string::npos)
+      << text;
+  // Nothing evaluated: the face count only.
+  const LandmarkEvaluationReport none = EvaluateLandmarks(faces, "toys", false, nullptr, 5);
+  EXPECT_EQ(none.ToText(), "");
+  EXPECT_EQ(nlohmann::json::parse(none.ToJson()), (nlohmann::json{{"data", "toys"}, {"faces", 4}}));
+}
+
+TEST(TrackerTraining, ReportPathDefaultsBesideTheModel) {
+  EXPECT_EQ(TrackerReportPath("out/tracker.ctrk", ""), std::filesystem::path("out/tracker_report.json"));
+  EXPECT_EQ(TrackerReportPath("tracker.ctrk", ""), std::filesystem::path("tracker_report.json"));
+  EXPECT_EQ(TrackerReportPath("out/tracker.ctrk", "r/x.json"), std::filesystem::path("r/x.json"));
 }
 
 }  // namespace

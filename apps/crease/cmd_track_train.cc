@@ -6,15 +6,13 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
-#include <fmt/format.h>
-#include <nlohmann/json.hpp>
+#include <optional>
 
 #include "apps/crease/commands.h"
 #include "core/error.h"
 #include "core/face_rig.h"
 #include "core/file_util.h"
 #include "core/options.h"
-#include "core/json_io.h"
 #include "eval/tracker_renders.h"
 #include "pipeline/capture/labelled_faces.h"
 #include "pipeline/capture/landmark_evaluation.h"
@@ -93,9 +91,7 @@ void AddTrainTrackerCommand(CLI::App& app) {
       result.report.sequence = EvaluateSequenceTracking(result.regressor, ReadLabelledFaces(a->sequence));
     }
     SaveShapeRegressor(a->out, result.regressor);
-    const fs::path out_path(a->out);
-    const fs::path report_path =
-        a->report.empty() ? out_path.parent_path() / (out_path.stem().string() + "_report.json") : fs::path(a->report);
+    const fs::path report_path = TrackerReportPath(a->out, a->report);
     WriteFileAtomic(report_path, [&](std::ostream& o) { o << result.report.ToJson() << "\n"; });
     std::printf("%s", result.report.ToText().c_str());
     std::printf("wrote %s and %s\n", a->out.c_str(), report_path.string().c_str());
@@ -133,38 +129,13 @@ void AddEvalLandmarksCommand(CLI::App& app) {
                                                 : ReadLabelledFaces(path);
     std::printf("%zu labelled faces from %s\n", faces.size(), a->data.c_str());
     if (!a->save_crops.empty()) WriteLabelledFaces(a->save_crops, faces);
-    nlohmann::json out;
-    out["data"] = a->data;
-    out["faces"] = faces.size();
-    auto report = [&](const LandmarkSourceEvaluation& e) {
-      std::printf("%-10s cold start (detector, then landmarks): found %d of %d faces; error %.3f IOD (%.2f px) on "
-                  "those; %.1f ms per face\n",
-                  e.source.c_str(), e.found, e.faces, e.error_iod, e.error_px, e.ms_per_face);
-      out[e.source] = {{"faces", e.faces},         {"found", e.found},          {"error_iod", e.error_iod},
-                       {"error_px", e.error_px}, {"ms_per_face", e.ms_per_face}};
-    };
-    if (a->use_dlib) {
-      DlibLandmarkSource dlib;
-      report(EvaluateLandmarkSource(dlib, faces));
-    }
-    if (!a->tracker.empty()) {
-      const ShapeRegressor regressor = LoadShapeRegressor(a->tracker);
-      RegressorLandmarkSource source(regressor);
-      report(EvaluateLandmarkSource(source, faces));
-      // Without the detector: from the truth under a random similarity (a a->tracker's
-      // previous frame) and from the mean shape in the truth's jittered box.
-      const ShapeRegressorEvaluation r = EvaluateShapeRegressor(regressor, faces, a->seed, /*detector_frames=*/0);
-      std::printf("regressor  from the perturbed truth: %.3f -> %.3f IOD (%.2f -> %.2f px); from a jittered box: "
-                  "%.3f -> %.3f IOD (%.2f -> %.2f px)\n",
-                  r.tracking.initial_iod, r.tracking.final_iod, r.tracking.initial_px, r.tracking.final_px,
-                  r.box.initial_iod, r.box.final_iod, r.box.initial_px, r.box.final_px);
-      out["regressor_tracking_init"] = {{"initial_iod", r.tracking.initial_iod}, {"final_iod", r.tracking.final_iod},
-                                        {"initial_px", r.tracking.initial_px}, {"final_px", r.tracking.final_px}};
-      out["regressor_box_init"] = {{"initial_iod", r.box.initial_iod}, {"final_iod", r.box.final_iod},
-                                   {"initial_px", r.box.initial_px}, {"final_px", r.box.final_px}};
-    }
+    std::optional<ShapeRegressor> regressor;
+    if (!a->tracker.empty()) regressor = LoadShapeRegressor(a->tracker);
+    const LandmarkEvaluationReport r =
+        EvaluateLandmarks(faces, a->data, a->use_dlib, regressor ? &*regressor : nullptr, a->seed);
+    std::printf("%s", r.ToText().c_str());
     if (!a->json_path.empty()) {
-      WriteJsonFile(a->json_path, out);
+      WriteFileAtomic(a->json_path, [&](std::ostream& o) { o << r.ToJson() << "\n"; });
       std::printf("wrote %s\n", a->json_path.c_str());
     }
   });

@@ -1,5 +1,6 @@
-// TrackerTrainingReport's text and JSON (pipeline/capture/tracker_training.h):
-// formatting only, kept apart from the training and the evaluation.
+// TrackerTrainingReport's and LandmarkEvaluationReport's text and JSON
+// (pipeline/capture/tracker_training.h): formatting only, kept apart from the
+// training and the evaluation.
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
@@ -78,6 +79,48 @@ std::string TrackerTrainingReport::ToJson() const {
                      {"error_px", sequence.error_px},     {"track_ms", sequence.track_ms}};
   }
   j["seconds"] = seconds;
+  return j.dump(2);
+}
+
+namespace {
+
+// The initial and final errors of one initialisation (without the frame count).
+nlohmann::json InitJson(const LandmarkErrorStats& e) {
+  return nlohmann::json{{"initial_iod", e.initial_iod}, {"final_iod", e.final_iod}, {"initial_px", e.initial_px},
+                        {"final_px", e.final_px}};
+}
+
+}  // namespace
+
+std::string LandmarkEvaluationReport::ToText() const {
+  std::string s;
+  for (const LandmarkSourceEvaluation& e : sources) {
+    s += fmt::format("{:<10} cold start (detector, then landmarks): found {} of {} faces; error {:.3f} IOD ({:.2f} px) "
+                     "on those; {:.1f} ms per face\n",
+                     e.source, e.found, e.faces, e.error_iod, e.error_px, e.ms_per_face);
+  }
+  if (has_regressor) {
+    const LandmarkErrorStats &t = regressor.tracking, &b = regressor.box;
+    s += fmt::format("regressor  from the perturbed truth: {:.3f} -> {:.3f} IOD ({:.2f} -> {:.2f} px); from a jittered "
+                     "box: {:.3f} -> {:.3f} IOD ({:.2f} -> {:.2f} px)\n",
+                     t.initial_iod, t.final_iod, t.initial_px, t.final_px, b.initial_iod, b.final_iod, b.initial_px,
+                     b.final_px);
+  }
+  return s;
+}
+
+std::string LandmarkEvaluationReport::ToJson() const {
+  nlohmann::json j;
+  j["data"] = data;
+  j["faces"] = faces;
+  for (const LandmarkSourceEvaluation& e : sources) {
+    j[e.source] = {{"faces", e.faces},       {"found", e.found},          {"error_iod", e.error_iod},
+                   {"error_px", e.error_px}, {"ms_per_face", e.ms_per_face}};
+  }
+  if (has_regressor) {
+    j["regressor_tracking_init"] = InitJson(regressor.tracking);
+    j["regressor_box_init"] = InitJson(regressor.box);
+  }
   return j.dump(2);
 }
 

@@ -141,4 +141,28 @@ TrackerTrainingResult TrainTrackerOnFolder(const fs::path& folder, const Tracker
   return r;
 }
 
+fs::path TrackerReportPath(const fs::path& out, const fs::path& report) {
+  return report.empty() ? out.parent_path() / (out.stem().string() + "_report.json") : report;
+}
+
+LandmarkEvaluationReport EvaluateLandmarks(const std::vector<LabelledFace>& faces, const std::string& data, bool dlib,
+                                           const ShapeRegressor* regressor, uint64_t seed) {
+  LandmarkEvaluationReport r;
+  r.data = data;
+  r.faces = static_cast<int>(faces.size());
+  if (dlib) {
+    DlibLandmarkSource source;
+    r.sources.push_back(EvaluateLandmarkSource(source, faces));
+  }
+  if (regressor) {
+    RegressorLandmarkSource source(*regressor);
+    r.sources.push_back(EvaluateLandmarkSource(source, faces));
+    // Without the detector: from the truth under a random similarity (a tracker's
+    // previous frame) and from the mean shape in the truth's jittered box.
+    r.has_regressor = true;
+    r.regressor = EvaluateShapeRegressor(*regressor, faces, seed, /*detector_frames=*/0);
+  }
+  return r;
+}
+
 }  // namespace crease

@@ -118,4 +118,30 @@ TrackerTrainingResult TrainAndEvaluateTracker(const std::vector<LabelledFace>& t
 // Reads a folder (ReadLabelledSplit), trains and evaluates.
 TrackerTrainingResult TrainTrackerOnFolder(const std::filesystem::path& folder, const TrackerTrainingOptions& options);
 
+// The report file of a trained tracker (`crease train-tracker`): `report` when given,
+// else <out without extension>_report.json beside the model file `out`.
+std::filesystem::path TrackerReportPath(const std::filesystem::path& out, const std::filesystem::path& report);
+
+// Landmark errors on labelled faces, as `crease eval-landmarks` reports them: landmark
+// sources from a cold start, and a trained regressor from the perturbed truth and
+// from a jittered box (without the detector).
+struct LandmarkEvaluationReport {
+  std::string data;  // where the faces came from, as given
+  int faces = 0;
+  std::vector<LandmarkSourceEvaluation> sources;  // cold start: dlib and/or the regressor, in that order
+  bool has_regressor = false;
+  ShapeRegressorEvaluation regressor;  // without the detector (detector_frames = 0); with has_regressor
+
+  // Formatting only (tracker_report.cc). A line per source, then the regressor's.
+  std::string ToText() const;
+  // data, faces, an object per source (by its name), regressor_tracking_init and
+  // regressor_box_init: 2-space indented JSON, keys sorted.
+  std::string ToJson() const;
+};
+
+// Evaluates dlib's detector and 68-point model (with `dlib`) and `regressor` (unless
+// null; its perturbed initialisations drawn from `seed`) on `faces`, read from `data`.
+LandmarkEvaluationReport EvaluateLandmarks(const std::vector<LabelledFace>& faces, const std::string& data, bool dlib,
+                                           const ShapeRegressor* regressor, uint64_t seed);
+
 }  // namespace crease
