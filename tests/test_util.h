@@ -3,10 +3,15 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <string>
+#include <system_error>
+#include <vector>
+
+#include <unistd.h>
 
 #include "core/error.h"
 #include "core/rig_import.h"
@@ -23,13 +28,27 @@ inline std::string ErrorOf(const std::function<void()>& f) {
   return "";
 }
 
-// A fresh, empty folder for the running test under GoogleTest's temp dir.
+// A fresh, empty folder for the running test under GoogleTest's temp dir:
+// crease_tests/SUITE.NAME_PID. The process id keeps two suites that run at once (a
+// CI clone beside a developer's run) from clearing each other's folders; the folder
+// is removed when the process exits after its tests passed, and kept for a look
+// when one failed.
 inline std::filesystem::path TestDir() {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "crease_tests" /
-                                    (std::string(info->test_suite_name()) + "." + info->name());
+  const std::filesystem::path dir =
+      std::filesystem::path(::testing::TempDir()) / "crease_tests" /
+      (std::string(info->test_suite_name()) + "." + info->name() + "_" + std::to_string(getpid()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
+  static std::vector<std::filesystem::path> made;
+  if (made.empty()) {
+    std::atexit([] {
+      if (!::testing::UnitTest::GetInstance()->Passed()) return;
+      std::error_code ec;
+      for (const auto& d : made) std::filesystem::remove_all(d, ec);
+    });
+  }
+  made.push_back(dir);
   return dir;
 }
 

@@ -221,6 +221,7 @@ TEST(Tracker, RecoversAfterTheOcclusionPreset) {
   o.ignore_missing_expressions = true;
   WriteSequenceDataset(Rig(), GenerateActor(Rig(), 8, ao), MakePresetSequence("occlusion", 2.0), o, d);
   auto frames = OpenFrameSource(d);
+  ASSERT_TRUE(frames->info().camera.has_value()) << d / "camera.json";
   FaceTracker tracker(Rig(), frames->info().camera->intrinsics, std::make_unique<DlibLandmarkSource>(), TrackerOptions{});
   cv::Mat f;
   int lost_while_occluded = 0, occluded = 0, recovered = 0, late = 0, early = 0, max_hidden = 0;
