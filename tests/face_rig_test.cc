@@ -72,7 +72,7 @@ TEST(FaceRig, EvaluateIsTheLinearBlendshapeModel) {
 
 TEST(FaceRig, FileRoundTripIsExact) {
   const FaceRig rig = SmallRig();
-  const fs::path p = fs::path(::testing::TempDir()) / "small.crig";
+  const fs::path p = ::crease::testing::TestDir() / "small.crig";
   WriteRig(p, rig);
   const FaceRig back = ReadRig(p);
   EXPECT_EQ(back.neutral.V, rig.neutral.V);
@@ -91,7 +91,7 @@ TEST(FaceRig, FileRoundTripIsExact) {
 }
 
 TEST(FaceRig, MalformedFilesGiveNamedErrors) {
-  const fs::path dir = fs::path(::testing::TempDir());
+  const fs::path dir = ::crease::testing::TestDir();
   const fs::path good = dir / "good.crig";
   WriteRig(good, SmallRig());
   std::string bytes;
@@ -279,7 +279,7 @@ TEST(RigImport, SampleObjFolder) {
 }
 
 TEST(RigImport, FaceRangeCropsAndErrorsNameTheFile) {
-  const fs::path dir = fs::path(::testing::TempDir()) / "crease_rig_import";
+  const fs::path dir = ::crease::testing::TestDir() / "crease_rig_import";
   fs::remove_all(dir);
   fs::copy(kSampleRig, dir, fs::copy_options::recursive);
   RigImportOptions opt;

@@ -31,7 +31,7 @@ cv::Mat RandomImage(int h, int w, int c, uint64_t seed) {
 
 // All image tests in one process: OpenImageIO costs ~0.35 s per process start.
 TEST(ImageIo, ExrPngRoundTripsSrgbAndErrors) {
-  const fs::path dir = fs::path(::testing::TempDir()) / "crease_image_io";
+  const fs::path dir = ::crease::testing::TestDir() / "crease_image_io";
   // EXR float: bit-exact, 1 and 3 channels.
   for (int c : {1, 3, 4}) {
     const cv::Mat img = RandomImage(17, 23, c, c);
@@ -131,7 +131,7 @@ TEST(ImageIo, ExrAttributeLargerThanTheFileIsRefusedFirst) {
   EXPECT_NE(e.find("attribute_claims_2gb.exr: EXR attribute 'capDate' (string) claims 1946157075 bytes"),
             std::string::npos) << e;
   // A data window beyond 10^8 pixels: a valid file with its dataWindow's xMax raised.
-  const fs::path dir = fs::path(::testing::TempDir()) / "crease_image_io";
+  const fs::path dir = ::crease::testing::TestDir() / "crease_image_io";
   const fs::path good = dir / "window.exr";
   WriteImage(good, RandomImage(4, 4, 1, 3));
   std::string bytes;
@@ -151,7 +151,7 @@ TEST(ImageIo, ExrAttributeLargerThanTheFileIsRefusedFirst) {
 }
 
 TEST(ImageIo, FullDiskIsAnErrorAndLeavesNoFile) {
-  const fs::path dir = fs::path(::testing::TempDir()) / "crease_image_full";
+  const fs::path dir = ::crease::testing::TestDir() / "crease_image_full";
   fs::remove_all(dir);
   fs::create_directories(dir);
   const cv::Mat noise = RandomImage(240, 320, 3, 9);

@@ -9,13 +9,14 @@
 
 #include "core/error.h"
 #include "core/rng.h"
+#include "test_util.h"
 
 namespace crease {
 namespace {
 namespace fs = std::filesystem;
 
 TEST(JsonIo, RoundTripIsExactForDoubles) {
-  const fs::path p = fs::path(::testing::TempDir()) / "crease_json_rt.json";
+  const fs::path p = ::crease::testing::TestDir() / "crease_json_rt.json";
   Rng rng(5);
   nlohmann::json j;
   std::vector<double> values;
@@ -31,7 +32,7 @@ TEST(JsonIo, RoundTripIsExactForDoubles) {
 }
 
 TEST(JsonIo, MalformedFileNamesLineAndColumn) {
-  const fs::path p = fs::path(::testing::TempDir()) / "crease_json_bad.json";
+  const fs::path p = ::crease::testing::TestDir() / "crease_json_bad.json";
   std::ofstream(p) << "{\n  \"a\": 1,\n  \"b\": ]\n}\n";
   try {
     ReadJsonFile(p);
@@ -40,7 +41,7 @@ TEST(JsonIo, MalformedFileNamesLineAndColumn) {
     EXPECT_NE(std::string(e.what()).find(p.string() + ":3:"), std::string::npos) << e.what();
   }
   try {
-    ReadJsonFile(fs::path(::testing::TempDir()) / "does_not_exist.json");
+    ReadJsonFile(::crease::testing::TestDir() / "does_not_exist.json");
     FAIL();
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("file does not exist"), std::string::npos);
@@ -50,7 +51,7 @@ TEST(JsonIo, MalformedFileNamesLineAndColumn) {
 // Issue 19 (fuzz/camera_json_fuzzer): a number beyond double's range was an
 // nlohmann out_of_range exception ("internal error" without the file).
 TEST(JsonIo, NumberOutOfRangeNamesTheFile) {
-  const fs::path p = fs::path(::testing::TempDir()) / "crease_json_1e400.json";
+  const fs::path p = ::crease::testing::TestDir() / "crease_json_1e400.json";
   std::ofstream(p) << "{\"fx\": 1e400}";
   try {
     ReadJsonFile(p);

@@ -14,6 +14,7 @@
 #include "synth/actor.h"
 #include "synth/dataset.h"
 #include "synth/procedural_rig.h"
+#include "test_util.h"
 #include "synth/sequence.h"
 
 namespace crease::testing {
@@ -25,11 +26,13 @@ inline const FaceRig& ProceduralRig() {
 }
 
 // An empty folder for a fixture shared by the cases of one test binary. One folder
-// per process: ctest runs the cases of a file in parallel processes.
+// per process: ctest runs the cases of a file in parallel processes. Removed at exit
+// when the process's tests passed.
 inline std::filesystem::path FixtureDir(const std::string& name) {
   const std::filesystem::path d =
       std::filesystem::path(::testing::TempDir()) / "crease_tests" / (name + "_" + std::to_string(getpid()));
   std::filesystem::remove_all(d);
+  RemoveAtExitIfPassed(d);
   return d;
 }
 

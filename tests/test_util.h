@@ -28,6 +28,20 @@ inline std::string ErrorOf(const std::function<void()>& f) {
   return "";
 }
 
+// Removes `dir` when the process exits after all its tests passed (a failed test's
+// files stay for a look).
+inline void RemoveAtExitIfPassed(const std::filesystem::path& dir) {
+  static std::vector<std::filesystem::path> dirs;
+  if (dirs.empty()) {
+    std::atexit([] {
+      if (!::testing::UnitTest::GetInstance()->Passed()) return;
+      std::error_code ec;
+      for (const auto& d : dirs) std::filesystem::remove_all(d, ec);
+    });
+  }
+  dirs.push_back(dir);
+}
+
 // A fresh, empty folder for the running test under GoogleTest's temp dir:
 // crease_tests/SUITE.NAME_PID. The process id keeps two suites that run at once (a
 // CI clone beside a developer's run) from clearing each other's folders; the folder
@@ -40,15 +54,7 @@ inline std::filesystem::path TestDir() {
       (std::string(info->test_suite_name()) + "." + info->name() + "_" + std::to_string(getpid()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
-  static std::vector<std::filesystem::path> made;
-  if (made.empty()) {
-    std::atexit([] {
-      if (!::testing::UnitTest::GetInstance()->Passed()) return;
-      std::error_code ec;
-      for (const auto& d : made) std::filesystem::remove_all(d, ec);
-    });
-  }
-  made.push_back(dir);
+  RemoveAtExitIfPassed(dir);
   return dir;
 }
 
