@@ -280,7 +280,6 @@ TEST(RigImport, SampleObjFolder) {
 
 TEST(RigImport, FaceRangeCropsAndErrorsNameTheFile) {
   const fs::path dir = ::crease::testing::TestDir() / "crease_rig_import";
-  fs::remove_all(dir);
   fs::copy(kSampleRig, dir, fs::copy_options::recursive);
   RigImportOptions opt;
   opt.face_last = 41 * 27;  // the upper 27 rows of vertices

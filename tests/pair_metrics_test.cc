@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include "pipeline/training/fern_cascade.h"
 #include "pipeline/training/pca.h"
+#include "test_util.h"
 
 namespace crease {
 namespace {
@@ -72,8 +73,7 @@ TEST(PairMetrics, LearnablePairsAreRegressedUnrelatedOnesAreNot) {
 }
 
 TEST(PairMetrics, PairFilesJoinWhenTheirExtractionAgrees) {
-  const auto dir = std::filesystem::path(::testing::TempDir()) / ("pair_metrics_" + std::to_string(getpid()));
-  std::filesystem::create_directories(dir);
+  const auto dir = testing::TestDir();
   TrainingPairs a = RampPairs(10, 1), b = RampPairs(7, 2), c = RampPairs(5, 3);
   a.actors = b.actors = c.actors = 1;
   c.options_json = R"({"patch_size": 8})";
@@ -157,8 +157,7 @@ TEST(PairMetrics, LeaveOneActorOutScoresEachActorOnAModelThatNeverSawIt) {
 }
 
 TEST(PairMetrics, ActorIdsSurviveFilesJoinsAndRowSelections) {
-  const auto dir = std::filesystem::path(::testing::TempDir()) / ("pair_actors_" + std::to_string(getpid()));
-  std::filesystem::create_directories(dir);
+  const auto dir = testing::TestDir();
   const TrainingPairs a = ActorPairs(2, 4, -1), b = ActorPairs(3, 2, -1);
   WriteTrainingPairs(dir / "a.cpr", a);
   WriteTrainingPairs(dir / "b.cpr", b);

@@ -1,8 +1,6 @@
 // Helpers for tests that build their fixtures with the studio (synth/).
 #pragma once
 
-#include <unistd.h>
-
 #include <filesystem>
 #include <string>
 #include <utility>
@@ -14,8 +12,8 @@
 #include "synth/actor.h"
 #include "synth/dataset.h"
 #include "synth/procedural_rig.h"
-#include "test_util.h"
 #include "synth/sequence.h"
+#include "test_util.h"
 
 namespace crease::testing {
 
@@ -28,13 +26,7 @@ inline const FaceRig& ProceduralRig() {
 // An empty folder for a fixture shared by the cases of one test binary. One folder
 // per process: ctest runs the cases of a file in parallel processes. Removed at exit
 // when the process's tests passed.
-inline std::filesystem::path FixtureDir(const std::string& name) {
-  const std::filesystem::path d =
-      std::filesystem::path(::testing::TempDir()) / "crease_tests" / (name + "_" + std::to_string(getpid()));
-  std::filesystem::remove_all(d);
-  RemoveAtExitIfPassed(d);
-  return d;
-}
+inline std::filesystem::path FixtureDir(const std::string& name) { return ProcessTempDir(name); }
 
 // Expression weights β (one per blendshape of `rig`) with the named ones set and
 // the rest 0; a name the rig does not have fails the test.

@@ -42,19 +42,23 @@ inline void RemoveAtExitIfPassed(const std::filesystem::path& dir) {
   dirs.push_back(dir);
 }
 
-// A fresh, empty folder for the running test under GoogleTest's temp dir:
-// crease_tests/SUITE.NAME_PID. The process id keeps two suites that run at once (a
-// CI clone beside a developer's run) from clearing each other's folders; the folder
-// is removed when the process exits after its tests passed, and kept for a look
-// when one failed.
+// An absent folder crease_tests/NAME_PID under GoogleTest's temp dir (removed if a
+// dead run left it), removed again when the process exits after its tests passed and
+// kept for a look when one failed. The process id keeps two suites that run at once
+// (a CI clone beside a developer's run) from clearing each other's folders.
+inline std::filesystem::path ProcessTempDir(const std::string& name) {
+  const std::filesystem::path dir =
+      std::filesystem::path(::testing::TempDir()) / "crease_tests" / (name + "_" + std::to_string(getpid()));
+  std::filesystem::remove_all(dir);
+  RemoveAtExitIfPassed(dir);
+  return dir;
+}
+
+// A fresh, empty folder for the running test: ProcessTempDir("SUITE.NAME").
 inline std::filesystem::path TestDir() {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  const std::filesystem::path dir =
-      std::filesystem::path(::testing::TempDir()) / "crease_tests" /
-      (std::string(info->test_suite_name()) + "." + info->name() + "_" + std::to_string(getpid()));
-  std::filesystem::remove_all(dir);
+  const std::filesystem::path dir = ProcessTempDir(std::string(info->test_suite_name()) + "." + info->name());
   std::filesystem::create_directories(dir);
-  RemoveAtExitIfPassed(dir);
   return dir;
 }
 
