@@ -96,6 +96,20 @@ void BM_ExtractReuse(benchmark::State& state) {
 }
 BENCHMARK(BM_ExtractReuse)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
 
+// Difference 4 of frame_texture.h: the blend with the previous frames (temporal_weight).
+void BM_BlendTextureHistory(benchmark::State& state) {
+  const auto threads = Threads(state);
+  const FrameTexture first = Extractor().Extract(TheScene().cam_vertices, TheScene().image);
+  FrameTexture history, t = first;
+  BlendTextureHistory(0.5, &t, &history);
+  for (auto _ : state) {
+    first.gray.copyTo(t.gray);  // the extraction's output, as the capture loop hands it over
+    BlendTextureHistory(0.5, &t, &history);
+    benchmark::DoNotOptimize(t.gray.data);
+  }
+}
+BENCHMARK(BM_BlendTextureHistory)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond);
+
 void BM_MesoscopicMap(benchmark::State& state) {
   const auto threads = Threads(state);
   const FrameTexture t = Extractor().Extract(TheScene().cam_vertices, TheScene().image);

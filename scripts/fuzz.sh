@@ -5,6 +5,9 @@
 #   scripts/fuzz.sh                  every target for 5 s (what .ci/run does)
 #   scripts/fuzz.sh 600              every target for 10 minutes
 #   scripts/fuzz.sh 3600 ply vtp     the named targets (ply → ply_fuzzer) for an hour each
+#   CREASE_FUZZ_RUNS=1000000 CREASE_FUZZ_PARALLEL=2 scripts/fuzz.sh 3600 ply obj
+#                                    each until 10^6 executions or an hour (issue 19's
+#                                    bound), two targets at a time (one per core)
 #
 # Each run: -max_total_time=SECONDS -rss_limit_mb=2048 (every allocation above 2 GB
 # counts too) -timeout=25 (one input taking longer is a hang), the target's dictionary
@@ -53,26 +56,43 @@ fi
 
 export ASAN_OPTIONS="${ASAN_OPTIONS:-detect_leaks=1}" UBSAN_OPTIONS="${UBSAN_OPTIONS:-print_stacktrace=1}" \
   LSAN_OPTIONS="${LSAN_OPTIONS:-suppressions=$root/fuzz/lsan.supp}"
-failed=()
-printf '%-24s %12s %10s %8s  %s\n' target executions exec/s seconds result
-for t in "${targets[@]}"; do
+# One target's run; its result line goes to $fz/$t.result (a finding: exit 1).
+run_target() {
+  local t="$1"
   mkdir -p "$fz/corpus/$t" "$fz/crashes/$t" "$fz/seeds/$t"
-  args=(-max_total_time="$seconds" -rss_limit_mb=2048 -timeout=25 -print_final_stats=1
+  local args=(-max_total_time="$seconds" -rss_limit_mb=2048 -timeout=25 -print_final_stats=1
         -artifact_prefix="$fz/crashes/$t/")
+  [ -n "${CREASE_FUZZ_RUNS:-}" ] && args+=(-runs="$CREASE_FUZZ_RUNS")
   [ -n "${dict[$t]}" ] && args+=(-dict="$root/fuzz/dict/${dict[$t]}.dict")
-  seeds=("$fz/seeds/$t")
+  local seeds=("$fz/seeds/$t") log="$fz/$t.log" start result runs rate status=0
   [ -d "$root/fuzz/corpus/$t" ] && seeds+=("$root/fuzz/corpus/$t")
-  log="$fz/$t.log"
   start=$(date +%s)
   if (cd "$fz" && "./$t" "${args[@]}" "$fz/corpus/$t" "${seeds[@]}") >"$log" 2>&1; then
     result=ok
   else
     result="FINDING (log: $log; input: $(ls -t "$fz/crashes/$t" | head -1))"
-    failed+=("$t")
+    status=1
   fi
   runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
   rate=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log" | tail -1)
-  printf '%-24s %12s %10s %8s  %s\n' "$t" "${runs:-?}" "${rate:-?}" "$(( $(date +%s) - start ))" "$result"
+  printf '%-24s %12s %10s %8s  %s\n' "$t" "${runs:-?}" "${rate:-?}" "$(( $(date +%s) - start ))" "$result" \
+    >"$fz/$t.result"
+  return $status
+}
+
+# CREASE_FUZZ_PARALLEL targets at a time (default 1); results in the order given.
+parallel="${CREASE_FUZZ_PARALLEL:-1}"
+for t in "${targets[@]}"; do
+  rm -f "$fz/$t.result"
+  while [ "$(jobs -rp | wc -l)" -ge "$parallel" ]; do wait -n || true; done
+  run_target "$t" &
+done
+wait || true
+failed=()
+printf '%-24s %12s %10s %8s  %s\n' target executions exec/s seconds result
+for t in "${targets[@]}"; do
+  if [ -f "$fz/$t.result" ]; then cat "$fz/$t.result"; else echo "$t: no result (the run did not finish)"; fi
+  grep -q '  ok$' "$fz/$t.result" 2>/dev/null || failed+=("$t")
 done
 if [ ${#failed[@]} -gt 0 ]; then
   echo "fuzz.sh: findings in ${failed[*]}" >&2

@@ -392,6 +392,73 @@ TEST(FrameTexture, Errors) {
   EXPECT_ERROR_HAS(FrameTextureExtractor(Rig(), s.camera.intrinsics, o), "max_view_angle_deg");
 }
 
+// Difference 4: the blend with the previous frames lowers independent noise's
+// variance to (1 − a)/(1 + a) of a frame's, follows a step within a^k after k frames,
+// and never mixes in texels that one of the two frames did not see.
+TEST(FrameTexture, TemporalBlendLowersNoiseAndKeepsUnseenTexelsApart) {
+  constexpr int kN = 64;
+  constexpr double kA = 0.5, kSigma = 0.02;
+  Rng rng(7);
+  auto frame = [&](double level) {
+    FrameTexture t;
+    t.gray.create(kN, kN, CV_32F);
+    for (int j = 0; j < kN; ++j)
+      for (int i = 0; i < kN; ++i) t.gray.at<float>(j, i) = static_cast<float>(level + kSigma * rng.Normal());
+    t.seen = cv::Mat(kN, kN, CV_8U, cv::Scalar(255));
+    t.num_seen = kN * kN;
+    return t;
+  };
+  FrameTexture history;
+  double sum = 0, sum2 = 0;
+  int n = 0;
+  for (int f = 0; f < 40; ++f) {
+    FrameTexture t = frame(0.3);
+    BlendTextureHistory(kA, &t, &history);
+    if (f < 10) continue;  // the blend's start-up
+    for (int j = 0; j < kN; ++j)
+      for (int i = 0; i < kN; ++i) {
+        const double v = t.gray.at<float>(j, i);
+        sum += v;
+        sum2 += v * v;
+        ++n;
+      }
+  }
+  const double var = sum2 / n - (sum / n) * (sum / n);
+  EXPECT_NEAR(var / (kSigma * kSigma), (1 - kA) / (1 + kA), 0.03);  // 1/3 at a = 0.5
+  EXPECT_NEAR(sum / n, 0.3, 1e-3);
+
+  // A step to 0.5 (noise-free): after k frames the blend is 0.5 − 0.2 a^k.
+  for (int k = 1; k <= 3; ++k) {
+    FrameTexture t = frame(0.5);
+    t.gray.setTo(0.5);
+    BlendTextureHistory(kA, &t, &history);
+    EXPECT_NEAR(cv::mean(t.gray)[0], 0.5 - 0.2 * std::pow(kA, k), 2e-3) << k;
+  }
+
+  // A texel the history did not see keeps its own value; one unseen now stays 0.
+  FrameTexture prev = frame(0.3);
+  prev.seen.at<uint8_t>(5, 5) = 0;
+  prev.gray.at<float>(5, 5) = 0;
+  FrameTexture h;
+  BlendTextureHistory(kA, &prev, &h);
+  FrameTexture cur = frame(0.5);
+  cur.gray.at<float>(5, 5) = 0.9f;
+  cur.seen.at<uint8_t>(6, 6) = 0;
+  cur.gray.at<float>(6, 6) = 0;
+  BlendTextureHistory(kA, &cur, &h);
+  EXPECT_FLOAT_EQ(cur.gray.at<float>(5, 5), 0.9f);
+  EXPECT_FLOAT_EQ(cur.gray.at<float>(6, 6), 0.0f);
+  EXPECT_EQ(h.seen.at<uint8_t>(6, 6), 0);
+
+  FrameTexture small = frame(0.3);
+  small.gray = cv::Mat(8, 8, CV_32F, cv::Scalar(0));
+  small.seen = cv::Mat(8, 8, CV_8U, cv::Scalar(255));
+  EXPECT_ERROR_HAS(BlendTextureHistory(kA, &small, &h), "the history is 64x64, the texture 8x8");
+  FrameTextureOptions o;
+  o.temporal_weight = 0.99;
+  EXPECT_ERROR_HAS(o.Check(), "temporal_weight");
+}
+
 // A studio frame (high-resolution actor with pores and wrinkles, skin albedo,
 // front light) textured with the actor's coarse mesh looks like the albedo.
 TEST(FrameTexture, StudioFrameLooksLikeTheSkinAlbedo) {

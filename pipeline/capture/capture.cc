@@ -133,6 +133,9 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
     }
     auto t0 = std::chrono::steady_clock::now();
     texture_->Extract(out.refined, frame, &out.texture, &previous_visible_);
+    if (options_.texture.temporal_weight > 0) {
+      BlendTextureHistory(options_.texture.temporal_weight, &out.texture, &texture_history_);
+    }
     out.timing.texture_ms = MsSince(t0);
     out.has_mesh = true;
     if (mesoscopic_.empty()) {
@@ -144,8 +147,9 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
       }
       out.timing.mesoscopic_ms = MsSince(t0);
     }
-  } else if (refiner_) {
-    refiner_->Reset();
+  } else {
+    if (refiner_) refiner_->Reset();
+    texture_history_ = FrameTexture();  // a lost face: nothing to blend the next texture with
   }
   was_tracked_ = tracked.tracked;
 

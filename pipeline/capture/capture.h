@@ -171,6 +171,7 @@ class CaptureSession {
   std::deque<CapturedFrame> pending_;  // frames waiting for the layout
   bool was_tracked_ = false;
   std::vector<uint8_t> previous_visible_;  // per rig vertex, from the last texture's depth buffer
+  FrameTexture texture_history_;  // T_s^{t−1} (frame_texture.h, Difference 4); empty after a lost face
 };
 
 }  // namespace crease

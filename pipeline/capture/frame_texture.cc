@@ -57,6 +57,7 @@ void FrameTextureOptions::VisitFields(OptionVisitor& v) {
   v.Field("max_view_angle_deg", max_view_angle_deg);
   v.Field("depth_tolerance_mm", depth_tolerance_mm);
   v.Field("erode_seen_texels", erode_seen_texels);
+  v.Field("temporal_weight", temporal_weight);
 }
 
 void FrameTextureOptions::Check() const {
@@ -69,6 +70,41 @@ void FrameTextureOptions::Check() const {
   CheckLe(o, "depth_tolerance_mm", depth_tolerance_mm, 1000.0);
   CheckGe(o, "erode_seen_texels", erode_seen_texels, 0);
   CheckLe(o, "erode_seen_texels", erode_seen_texels, 64);
+  CheckGe(o, "temporal_weight", temporal_weight, 0.0);
+  CheckLe(o, "temporal_weight", temporal_weight, 0.95);
+}
+
+void BlendTextureHistory(double weight, FrameTexture* texture, FrameTexture* history) {
+  cv::Mat& g = texture->gray;
+  const cv::Mat& s = texture->seen;
+  Require(g.type() == CV_32FC1 && s.type() == CV_8UC1 && g.size() == s.size(),
+          "BlendTextureHistory: expected a CV_32F texture and a CV_8U seen mask of one size");
+  if (history->gray.empty()) {
+    history->gray = g.clone();
+    history->seen = s.clone();
+    history->num_seen = texture->num_seen;
+    return;
+  }
+  Require(history->gray.size() == g.size() && history->gray.type() == CV_32FC1 && history->seen.size() == s.size() &&
+              history->seen.type() == CV_8UC1,
+          fmt::format("BlendTextureHistory: the history is {}x{}, the texture {}x{}", history->gray.cols,
+                      history->gray.rows, g.cols, g.rows));
+  // One pass, in place: blend where both saw the texel, then the result becomes the history.
+  const float a = static_cast<float>(weight), b = 1.0f - a;
+  tbb::parallel_for(tbb::blocked_range<int>(0, g.rows, 64), [&](const tbb::blocked_range<int>& rows) {
+    for (int j = rows.begin(); j < rows.end(); ++j) {
+      float* cur = g.ptr<float>(j);
+      const uint8_t* seen = s.ptr<uint8_t>(j);
+      float* hist = history->gray.ptr<float>(j);
+      uint8_t* hist_seen = history->seen.ptr<uint8_t>(j);
+      for (int i = 0; i < g.cols; ++i) {
+        if (seen[i] && hist_seen[i]) cur[i] = b * cur[i] + a * hist[i];
+        hist[i] = cur[i];
+        hist_seen[i] = seen[i];
+      }
+    }
+  });
+  history->num_seen = texture->num_seen;
 }
 
 void MesoscopicOptions::VisitFields(OptionVisitor& v) {

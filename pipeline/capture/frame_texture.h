@@ -57,6 +57,20 @@
 //      texel (cheaper; differs by < 1° on the coarse mesh's triangles).
 //   3. Triangles with a vertex less than 1 mm in front of the camera are not
 //      rasterised into the depth buffer (no near-plane clipping).
+//   4. T^t is blended with the previous frames' blend where both saw the texel,
+//      T_s^t = (1 − a) T^t + a T_s^{t−1} (BlendTextureHistory; temporal_weight
+//      a = 0.5 by default, 0 = the paper). Sec. 5.1 asks for a temporally stable
+//      texture and gets it from the flow refinement alone, which leaves the camera's
+//      noise in it, and the fern features (pixel differences, Sec. 4.3) flip on it.
+//      The blend lowers the noise's variance to (1 − a)/(1 + a) of a frame's (1/3)
+//      and lags a change of the face by a/(1 − a) frames (1). Measured (issue 17's
+//      ladder, quick profile, rung R2, 3 seeds, lined novel actors: age ≥ 0.7,
+//      640×480): D^t's frame-to-frame correlation on a still face 0.884 ± 0.030 →
+//      0.950 ± 0.027 at a = 0.5, and its wrinkle-region correlation with D* 0.148 →
+//      0.174; with the flattened-texture training levers (ratio, α = 0.002, G 1 mm)
+//      0.729 ± 0.157 → 0.867 ± 0.089 (a = 0.5) and 0.929 ± 0.060 (a = 0.7), the
+//      correlation 0.371 → 0.389 / 0.394. About 1 ms per frame at R = 1024
+//      (bench/frame_texture_bench BM_BlendTextureHistory, 2 cores).
 #pragma once
 
 #include <cstdint>
@@ -90,6 +104,8 @@ struct FrameTextureOptions {
   // footprint depth test already keeps blended samples out. Costs a few extra
   // passes over the R×R masks.
   int erode_seen_texels = 0;
+  // a of Difference 4: the previous frames' share of T^t, in [0, 0.95]. 0 = off (the paper).
+  double temporal_weight = 0.5;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
@@ -118,6 +134,12 @@ class RigVertexNormals {
   MatX3i F_;
   std::vector<std::pair<int, int>> seam_pairs_;  // (copy, representative), copy > representative
 };
+
+// Difference 4: `texture` becomes (1 − weight) T + weight H on the texels that both
+// `texture` and `history` saw (elsewhere it stays as extracted), and `history`
+// becomes that result. An empty `history` (the first frame, or after a lost face)
+// is only filled. Throws Error when the maps differ in size or type.
+void BlendTextureHistory(double weight, FrameTexture* texture, FrameTexture* history);
 
 class FrameTextureExtractor {
  public:
