@@ -83,6 +83,27 @@ void ArrayFileWriter::Write(const fs::path& path, const char* magic, uint32_t ve
   });
 }
 
+std::vector<int64_t> ReadArrayShape(const nlohmann::json& shape, uint64_t max_bytes, size_t element_size,
+                                    const std::string& what, const std::string& name) {
+  Require(shape.is_array() && shape.size() <= 8,
+          fmt::format("{}: array '{}' has an invalid shape (expected a list of at most 8 sizes)", what, name));
+  std::vector<int64_t> dims;
+  uint64_t elements = 1;
+  const uint64_t limit = max_bytes / element_size;
+  for (const json& d : shape) {
+    Require(d.is_number_integer(), fmt::format("{}: array '{}' has a shape entry that is not an integer", what, name));
+    const int64_t s = d.get<int64_t>();
+    Require(s >= 0 && s < (int64_t{1} << 34), fmt::format("{}: array '{}' has an invalid shape", what, name));
+    dims.push_back(s);
+    if (s == 0) elements = 0;
+    Require(elements == 0 || static_cast<uint64_t>(s) <= limit / elements,
+            fmt::format("{}: truncated file (array '{}' needs more than the {} bytes it can have)", what, name,
+                        max_bytes));
+    elements *= static_cast<uint64_t>(s);
+  }
+  return dims;
+}
+
 ArrayFile ReadArrayFile(const fs::path& path, const char* magic, uint32_t version, const std::string& kind) {
   const std::string what = path.string();
   RequireReadableFile(path);
@@ -116,12 +137,9 @@ ArrayFile ReadArrayFile(const fs::path& path, const char* magic, uint32_t versio
       ArrayEntry e;
       const std::string name = a.at("name").get<std::string>();
       e.dtype = a.at("dtype").get<std::string>();
-      e.shape = a.at("shape").get<std::vector<int64_t>>();
       const size_t es = ElementSize(e.dtype);
       Require(es > 0, fmt::format("{}: array '{}' has an unknown dtype '{}'", what, name, e.dtype));
-      for (auto s : e.shape) {
-        Require(s >= 0 && s < (int64_t{1} << 34), fmt::format("{}: array '{}' has an invalid shape", what, name));
-      }
+      e.shape = ReadArrayShape(a.at("shape"), data.size() - pos, es, what, name);
       const size_t bytes = e.count() * es;
       e.bytes.assign(take(bytes, "array " + name), bytes);
       file.arrays[name] = std::move(e);

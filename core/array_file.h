@@ -16,6 +16,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json_fwd.hpp>
+
 namespace crease {
 
 struct ArrayEntry {
@@ -54,6 +56,13 @@ struct ArrayFile {
   template <class T>
   std::vector<T> Get(const std::string& name, int64_t expected_count, const std::string& what) const;
 };
+
+// An array's shape from its header entry `shape` (issue 19): a list of at most 8
+// JSON integers (a float such as 1e72 would convert to int64_t with undefined
+// behaviour), each in [0, 2^34), whose product times `element_size` is at most
+// `max_bytes` (checked without overflow). Throws Error naming `what` and the array.
+std::vector<int64_t> ReadArrayShape(const nlohmann::json& shape, uint64_t max_bytes, size_t element_size,
+                                    const std::string& what, const std::string& name);
 
 // Reads a container; `kind` names the file type in errors ("detail model").
 // Throws Error for a missing file, another magic, another version, a truncated

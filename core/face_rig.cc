@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "core/array_file.h"
 #include "core/error.h"
 #include "core/file_util.h"
 #include "core/options.h"
@@ -164,8 +165,9 @@ struct ArrayDesc {
   std::string encoding = "raw";  // or "zlib"
   uint64_t stored_bytes = 0;     // bytes in the file (zlib)
   double scale = 1.0;            // i16: value = integer · scale
+  size_t element_size() const { return dtype == "f64" ? 8 : dtype == "u8" ? 1 : dtype == "i16" ? 2 : 4; }
   size_t bytes() const {
-    size_t n = dtype == "f64" ? 8 : dtype == "u8" ? 1 : dtype == "i16" ? 2 : 4;
+    size_t n = element_size();
     for (auto s : shape) n *= static_cast<size_t>(s);
     return n;
   }
@@ -323,13 +325,12 @@ FaceRig ReadRig(const fs::path& path) {
       rig.landmarks.push_back({l.at("name").get<std::string>(), l.at("vertex").get<int>()});
     }
     for (const auto& a : header.at("arrays")) {
-      ArrayDesc d{a.at("name").get<std::string>(), a.at("dtype").get<std::string>(),
-                  a.at("shape").get<std::vector<int64_t>>()};
+      ArrayDesc d{a.at("name").get<std::string>(), a.at("dtype").get<std::string>(), {}};
+      // Raw bytes must be in the file; zlib's can inflate at most ~1100× (ZlibDecompress).
+      const uint64_t left = data.size() - pos;
+      d.shape = ReadArrayShape(a.at("shape"), 1100 * left + 1024, d.element_size(), what, d.name);
       d.encoding = a.value("encoding", std::string("raw"));
       d.scale = a.value("scale", 1.0);
-      for (auto s : d.shape) {
-        if (s < 0 || s > (int64_t{1} << 34)) throw Error(fmt::format("{}: array '{}' has an invalid shape", what, d.name));
-      }
       std::string inflated;
       const char* p = nullptr;
       if (d.encoding == "zlib") {

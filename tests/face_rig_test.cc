@@ -4,6 +4,7 @@
 
 #include "tests/test_util.h"
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -123,6 +124,42 @@ TEST(FaceRig, MalformedFilesGiveNamedErrors) {
   bad = SmallRig();
   bad.neutral.UV.resize(0, 2);
   EXPECT_NE(ErrorOf([&] { bad.Validate("r"); }).find("no UV coordinates"), std::string::npos);
+}
+
+// Issue 19 (cdm_fuzzer): an array shape holding a float (1e72) was converted to
+// int64_t (undefined behaviour); sizes whose product overflows 64 bits must not wrap
+// to a small count. Every crease array file (.crig, .cdm, .ctrk, .cpr, .cfr) reads
+// its header the same way (core/array_file.cc).
+TEST(FaceRig, ArrayShapesAreCheckedIntegersWithinTheFile) {
+  const fs::path dir = ::crease::testing::TestDir();
+  WriteRig(dir / "good.crig", SmallRig());
+  std::string bytes;
+  {
+    std::ifstream in(dir / "good.crig", std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  // The container: magic (8 bytes), version (u32), header length (u64), the JSON header.
+  uint64_t length = 0;
+  std::memcpy(&length, bytes.data() + 12, sizeof(length));
+  const std::string header = bytes.substr(20, length);
+  const size_t shape = header.find("\"shape\":[");
+  ASSERT_NE(shape, std::string::npos) << header;
+  const size_t open = shape + 9, close = header.find(']', open);
+  auto with_shape = [&](const std::string& name, const std::string& dims) {
+    std::string h = header;
+    h.replace(open, close - open, dims);
+    std::string b = bytes;
+    const uint64_t n = h.size();
+    b.replace(20, length, h);
+    std::memcpy(b.data() + 12, &n, sizeof(n));
+    std::ofstream(dir / name, std::ios::binary) << b;
+    return ErrorOf([&] { ReadRig(dir / name); });
+  };
+  EXPECT_NE(with_shape("float.crig", "1e72,3").find("float.crig: array"), std::string::npos);
+  EXPECT_NE(with_shape("float.crig", "1e72,3").find("not an integer"), std::string::npos);
+  EXPECT_NE(with_shape("wrap.crig", "17179869183,17179869183,17179869183,17179869183").find("needs more than the"),
+            std::string::npos);
+  EXPECT_NE(with_shape("negative.crig", "-1,3").find("invalid shape"), std::string::npos);
 }
 
 TEST(FaceRig, CompactFileKeepsDeltasWithinHalfAStep) {
