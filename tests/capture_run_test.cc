@@ -310,17 +310,11 @@ TEST(CaptureRun, CfrVertexCountIsBounded) {
   a.coarse = MatX3d::Zero(4, 3);
   a.refined = MatX3d::Zero(4, 3);
   WriteCaptureFrameArrays(dir / "f.cfr", a);
-  std::string bytes = ReadFileToString(dir / "f.cfr");
-  // The container: magic (8 bytes), version (u32), header length (u64), the JSON header.
-  uint64_t length = 0;
-  std::memcpy(&length, bytes.data() + 12, sizeof(length));
-  std::string header = bytes.substr(20, length);
   const std::string from = "\"num_vertices\":4", to = "\"num_vertices\":9223372036854775807";
-  ASSERT_NE(header.find(from), std::string::npos) << header;
-  header.replace(header.find(from), from.size(), to);
-  const uint64_t new_length = header.size();
-  bytes.replace(20, length, header);
-  std::memcpy(bytes.data() + 12, &new_length, sizeof(new_length));
+  const std::string bytes = testing::EditArrayFileHeader(ReadFileToString(dir / "f.cfr"), [&](std::string header) {
+    EXPECT_NE(header.find(from), std::string::npos) << header;
+    return header.replace(header.find(from), from.size(), to);
+  });
   testing::WriteText(dir / "huge.cfr", bytes);
   EXPECT_ERROR_HAS(ReadCaptureFrameArrays(dir / "huge.cfr"), "huge.cfr: num_vertices above");
 }

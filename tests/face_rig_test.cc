@@ -4,7 +4,6 @@
 
 #include "tests/test_util.h"
 
-#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -12,6 +11,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/error.h"
+#include "core/file_util.h"
 #include "core/json_io.h"
 #include "core/mesh_primitives.h"
 #include "core/rig_import.h"
@@ -133,30 +133,20 @@ TEST(FaceRig, MalformedFilesGiveNamedErrors) {
 TEST(FaceRig, ArrayShapesAreCheckedIntegersWithinTheFile) {
   const fs::path dir = ::crease::testing::TestDir();
   WriteRig(dir / "good.crig", SmallRig());
-  std::string bytes;
-  {
-    std::ifstream in(dir / "good.crig", std::ios::binary);
-    bytes.assign(std::istreambuf_iterator<char>(in), {});
-  }
-  // The container: magic (8 bytes), version (u32), header length (u64), the JSON header.
-  uint64_t length = 0;
-  std::memcpy(&length, bytes.data() + 12, sizeof(length));
-  const std::string header = bytes.substr(20, length);
-  const size_t shape = header.find("\"shape\":[");
-  ASSERT_NE(shape, std::string::npos) << header;
-  const size_t open = shape + 9, close = header.find(']', open);
+  const std::string bytes = ReadFileToString(dir / "good.crig");
   auto with_shape = [&](const std::string& name, const std::string& dims) {
-    std::string h = header;
-    h.replace(open, close - open, dims);
-    std::string b = bytes;
-    const uint64_t n = h.size();
-    b.replace(20, length, h);
-    std::memcpy(b.data() + 12, &n, sizeof(n));
-    std::ofstream(dir / name, std::ios::binary) << b;
+    const std::string b = ::crease::testing::EditArrayFileHeader(bytes, [&](std::string h) {
+      const size_t shape = h.find("\"shape\":[");
+      EXPECT_NE(shape, std::string::npos) << h;
+      const size_t open = shape + 9;
+      return h.replace(open, h.find(']', open) - open, dims);
+    });
+    ::crease::testing::WriteText(dir / name, b);
     return ErrorOf([&] { ReadRig(dir / name); });
   };
-  EXPECT_NE(with_shape("float.crig", "1e72,3").find("float.crig: array"), std::string::npos);
-  EXPECT_NE(with_shape("float.crig", "1e72,3").find("not an integer"), std::string::npos);
+  const std::string float_error = with_shape("float.crig", "1e72,3");
+  EXPECT_NE(float_error.find("float.crig: array"), std::string::npos);
+  EXPECT_NE(float_error.find("not an integer"), std::string::npos);
   EXPECT_NE(with_shape("wrap.crig", "17179869183,17179869183,17179869183,17179869183").find("needs more than the"),
             std::string::npos);
   EXPECT_NE(with_shape("negative.crig", "-1,3").find("invalid shape"), std::string::npos);

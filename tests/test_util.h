@@ -3,7 +3,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -68,6 +70,19 @@ inline void WriteText(const std::filesystem::path& path, const std::string& text
 }
 
 // The bundled sample rig (data/sample_rig: a blendshape OBJ folder in cm), imported once.
+// A crease array file's bytes (magic 8 bytes, version u32, header length u64, the
+// JSON header, the arrays) with its header replaced by edit(header) and the length
+// field updated: for tests of malformed headers.
+inline std::string EditArrayFileHeader(std::string bytes, const std::function<std::string(std::string)>& edit) {
+  uint64_t length = 0;
+  std::memcpy(&length, bytes.data() + 12, sizeof(length));
+  const std::string header = edit(bytes.substr(20, length));
+  const uint64_t new_length = header.size();
+  bytes.replace(20, length, header);
+  std::memcpy(bytes.data() + 12, &new_length, sizeof(new_length));
+  return bytes;
+}
+
 inline const FaceRig& SampleRig() {
   static const FaceRig rig = [] {
     RigImportOptions options;
