@@ -1,6 +1,7 @@
 #include "core/image_io.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -22,6 +23,22 @@ namespace {
 // any camera frame (as 4-channel float, 1.6 GB). A header claiming more (a PNG of
 // 100000×100000: 120 GB) is refused before anything is allocated (issue 19).
 constexpr int64_t kMaxImagePixels = 100'000'000;
+// The widest or tallest image crease decodes: 32768 pixels. Readers allocate buffers of
+// whole rows (OpenEXR a block of 16 to 256 rows, twice), so a 298-byte EXR whose data
+// window is 6553604×2 (13 M pixels, within the bound above) made OpenEXR allocate 5 GB
+// (issue 19, fuzz/regressions/exr_fuzzer/wide_data_window.exr).
+constexpr int64_t kMaxImageSide = 32768;
+// An EXR tile of at most 4096² pixels (OpenEXR allocates whole tiles per thread).
+constexpr int64_t kMaxExrTilePixels = int64_t{4096} * 4096;
+
+// Throws unless w×h is an image size crease reads (see the bounds above); `what`
+// names the header field, e.g. "the EXR data window".
+void CheckImageSize(const fs::path& path, const char* what, int64_t w, int64_t h) {
+  if (w < 1 || h < 1 || w > kMaxImageSide || h > kMaxImageSide || w * h > kMaxImagePixels) {
+    throw Error(fmt::format("{}: {} claims {}x{} pixels (crease reads 1 to {} per side, {} in all)", path.string(),
+                            what, w, h, kMaxImageSide, kMaxImagePixels));
+  }
+}
 
 bool IsFloatFormat(const std::string& ext) {
   return ext == ".exr" || ext == ".hdr" || ext == ".pfm";
@@ -74,16 +91,45 @@ void CheckExrHeader(const fs::path& path) {
       if (name == "dataWindow" && type == "box2i" && size == 16) {
         int32_t box[4];
         in.read(reinterpret_cast<char*>(box), 16);
-        const int64_t w = int64_t{box[2]} - box[0] + 1, h = int64_t{box[3]} - box[1] + 1;
-        if (w < 1 || h < 1 || w * h > kMaxImagePixels) {
-          throw Error(fmt::format("{}: the EXR data window claims {}x{} pixels (1 to {} are read)", path.string(),
-                                  w, h, kMaxImagePixels));
+        CheckImageSize(path, "the EXR data window", int64_t{box[2]} - box[0] + 1, int64_t{box[3]} - box[1] + 1);
+      } else if (name == "tiles" && type == "tiledesc" && size == 9) {
+        uint32_t tile[2];
+        char mode = 0;
+        in.read(reinterpret_cast<char*>(tile), 8).get(mode);
+        if (tile[0] < 1 || tile[1] < 1 || int64_t{tile[0]} * tile[1] > kMaxExrTilePixels) {
+          throw Error(fmt::format("{}: the EXR tiles claim {}x{} pixels each (1 to {} are read)", path.string(),
+                                  tile[0], tile[1], kMaxExrTilePixels));
         }
       } else {
         in.seekg(size, std::ios::cur);
       }
     }
     if (!multipart) break;
+  }
+}
+
+// libpng allocates a chunk at the length its header states before reading it (the
+// Debian build sets no limit), so a 200-byte PNG whose tEXt chunk claimed 2.1 GB
+// allocated 2.1 GB (issue 19, fuzz/regressions/png_fuzzer/chunk_claims_2gb.png).
+// Before OpenImageIO opens a PNG (its 8-byte signature; others pass), its chunks are
+// walked up to IEND: a chunk longer than the rest of the file is an Error naming the
+// file and the chunk. A file that ends between chunks is left to libpng's error.
+void CheckPngChunks(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  char signature[8] = {};
+  if (!in.read(signature, 8) || std::memcmp(signature, "\x89PNG\r\n\x1a\n", 8) != 0) return;
+  const int64_t file_size = static_cast<int64_t>(fs::file_size(path));
+  for (unsigned char head[8]; in.read(reinterpret_cast<char*>(head), 8);) {
+    const int64_t length = int64_t{head[0]} << 24 | int64_t{head[1]} << 16 | int64_t{head[2]} << 8 | head[3];
+    std::string type(head + 4, head + 8);
+    for (char& c : type) c = std::isalpha(static_cast<unsigned char>(c)) ? c : '?';
+    const int64_t rest = file_size - static_cast<int64_t>(in.tellg());
+    if (length + 4 > rest) {  // the data and its CRC
+      throw Error(fmt::format("{}: PNG chunk '{}' claims {} bytes, but the file has {} left", path.string(), type,
+                              length, std::max<int64_t>(rest - 4, 0)));
+    }
+    if (type == "IEND") return;
+    in.seekg(length + 4, std::ios::cur);
   }
 }
 
@@ -106,6 +152,7 @@ void Encode(OIIO::ImageOutput& out, const std::string& name, const OIIO::ImageSp
 cv::Mat ReadImage(const fs::path& path, bool srgb) {
   RequireReadableFile(path);
   CheckExrHeader(path);
+  CheckPngChunks(path);
   auto in = OIIO::ImageInput::open(path.string());
   if (!in) {
     throw Error(fmt::format("{}: cannot read image: {}", path.string(), OIIO::geterror()));
@@ -116,10 +163,7 @@ cv::Mat ReadImage(const fs::path& path, bool srgb) {
     throw Error(fmt::format("{}: unsupported image layout {}x{} with {} channels", path.string(),
                             w, h, c));
   }
-  if (static_cast<int64_t>(w) * h > kMaxImagePixels) {
-    throw Error(fmt::format("{}: the header claims {}x{} pixels, more than the {} that crease reads",
-                            path.string(), w, h, kMaxImagePixels));
-  }
+  CheckImageSize(path, "the header", w, h);
   cv::Mat img(h, w, CV_32FC(c));
   if (!in->read_image(0, 0, 0, c, OIIO::TypeDesc::FLOAT, img.data)) {
     const std::string err = in->geterror();

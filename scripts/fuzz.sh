@@ -44,10 +44,11 @@ done
 [ ${#targets[@]} -gt 0 ] || targets=("${all[@]}")
 
 fz="$build/fuzz"
-rm -rf "$fz/seeds"
 # CREASE_FUZZ_WRITTEN_SEEDS=0 skips the seeds crease writes (write_seeds links every
-# library; CI's core subset does without them, from the text corpora and an empty start).
+# library; CI's core subset does without them, from the text corpora and an empty start)
+# and leaves build-asan/fuzz/seeds/ as it is (another fuzz.sh may be reading it).
 if [ "${CREASE_FUZZ_WRITTEN_SEEDS:-1}" = 1 ]; then
+  rm -rf "$fz/seeds"
   "$root/scripts/asan_build.sh" write_seeds "${targets[@]}"
   "$fz/write_seeds" "$fz/seeds"
 else

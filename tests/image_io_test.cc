@@ -12,6 +12,7 @@
 #include <opencv2/core.hpp>
 
 #include "core/error.h"
+#include "core/file_util.h"
 #include "core/rng.h"
 #include "tests/test_util.h"
 
@@ -119,10 +120,6 @@ TEST(ImageIo, ExrPngRoundTripsSrgbAndErrors) {
   }
 }
 
-// Issue 19: onto a full disk, `synth render -o r.png` exited 0 and left a truncated
-// PNG (OIIO's PNG writer does not report the failed write). A file size limit
-// (RLIMIT_FSIZE, each ctest test is its own process) stands in for the full disk:
-// every format must throw, naming the file, and leave neither it nor a temporary.
 // Issue 19: a 347-byte EXR whose capDate attribute claims 1.9 GB made OpenEXR allocate
 // 2 GB (24 s) before failing; the header walk refuses it before OpenImageIO opens it.
 TEST(ImageIo, ExrAttributeLargerThanTheFileIsRefusedFirst) {
@@ -148,7 +145,45 @@ TEST(ImageIo, ExrAttributeLargerThanTheFileIsRefusedFirst) {
   std::ofstream(wide, std::ios::binary) << bytes;
   EXPECT_NE(testing::ErrorOf([&] { ReadImage(wide); }).find("data window claims 2000000001x4 pixels"), std::string::npos);
   EXPECT_EQ(ReadImage(good).rows, 4);  // the walk accepts crease's own files
+  // Fuzzing (2026-12-05): a 298-byte EXR whose data window is 6553604×2 (13 M pixels,
+  // within 10^8) made OpenEXR allocate 5 GB of row buffers; each side is bounded too.
+  const fs::path regressions = fs::path(CREASE_TEST_DIR) / "../fuzz/regressions";
+  EXPECT_NE(testing::ErrorOf([&] { ReadImage(regressions / "exr_fuzzer/wide_data_window.exr"); })
+                .find("wide_data_window.exr: the EXR data window claims 6553604x2 pixels (crease reads 1 to 32768 per side"),
+            std::string::npos);
+  // A tile of 65536² pixels: a `tiles` attribute put first in crease's own header.
+  std::string tiled = bytes.substr(0, 8) + std::string("tiles\0tiledesc\0", 15);
+  const uint32_t tile_desc[2] = {65536, 65536};
+  tiled += std::string("\x09\0\0\0", 4) + std::string(reinterpret_cast<const char*>(tile_desc), 8) + '\0';
+  std::memcpy(&bytes[x_max], "\x03\0\0\0", 4);  // the data window back to 4×4
+  tiled += bytes.substr(8);
+  std::ofstream(dir / "tiled.exr", std::ios::binary) << tiled;
+  EXPECT_NE(testing::ErrorOf([&] { ReadImage(dir / "tiled.exr"); }).find("tiled.exr: the EXR tiles claim 65536x65536"),
+            std::string::npos);
 }
+
+// Fuzzing (2026-12-05): a 200-byte PNG whose tEXt chunk claims 2.1 GB made libpng
+// allocate 2.1 GB; the chunk walk refuses a chunk longer than the rest of the file.
+TEST(ImageIo, PngChunkLargerThanTheFileIsRefusedFirst) {
+  const fs::path bad = fs::path(CREASE_TEST_DIR) / "../fuzz/regressions/png_fuzzer/chunk_claims_2gb.png";
+  const std::string e = testing::ErrorOf([&] { ReadImage(bad); });
+  EXPECT_NE(e.find("chunk_claims_2gb.png: PNG chunk 'tEXt' claims 2113929238 bytes, but the file has"),
+            std::string::npos) << e;
+  // Crease's own PNGs pass the walk; one cut inside its last chunk does not.
+  const fs::path dir = ::crease::testing::TestDir() / "crease_image_png_chunks";
+  fs::create_directories(dir);
+  WriteImage(dir / "ok.png", RandomImage(5, 7, 3, 4));
+  EXPECT_EQ(ReadImage(dir / "ok.png").cols, 7);
+  std::string png = ReadFileToString(dir / "ok.png");
+  std::ofstream(dir / "cut.png", std::ios::binary) << png.substr(0, png.size() - 2);
+  EXPECT_NE(testing::ErrorOf([&] { ReadImage(dir / "cut.png"); }).find("cut.png: PNG chunk 'IEND' claims 0 bytes"),
+            std::string::npos);
+}
+
+// Issue 19: onto a full disk, `synth render -o r.png` exited 0 and left a truncated
+// PNG (OIIO's PNG writer does not report the failed write). A file size limit
+// (RLIMIT_FSIZE, each ctest test is its own process) stands in for the full disk:
+// every format must throw, naming the file, and leave neither it nor a temporary.
 
 TEST(ImageIo, FullDiskIsAnErrorAndLeavesNoFile) {
   const fs::path dir = ::crease::testing::TestDir() / "crease_image_full";
