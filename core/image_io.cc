@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <limits>
+#include <map>
 #include <vector>
 #include <fmt/format.h>
 #include <OpenImageIO/filesystem.h>
@@ -57,13 +59,52 @@ std::string ReadExrHeaderString(std::istream& in, const fs::path& path, const ch
   throw Error(fmt::format("{}: EXR header ends inside an attribute {}", path.string(), what));
 }
 
+// The bytes OpenEXR's reader takes for an attribute's value of `type`, which for
+// most types is not the size the header states: fixed-size types read their own
+// size, a channel list reads channels up to an empty name, a preview its width ×
+// height × 4 pixels. -1: the stated size (strings, vectors, unknown types);
+// kPastTheEnd: a value that would run past the end of the file. `in` stands at the
+// value and is left there.
+constexpr int64_t kPastTheEnd = std::numeric_limits<int64_t>::max();
+int64_t ExrValueBytes(std::istream& in, const std::string& type, int64_t size) {
+  static const std::map<std::string, int64_t> kFixed = {
+      {"box2i", 16}, {"box2f", 16}, {"v2i", 8},  {"v2f", 8},   {"v2d", 16},  {"v3i", 12},
+      {"v3f", 12},   {"v3d", 24},   {"int", 4},  {"float", 4}, {"double", 8}, {"compression", 1},
+      {"lineOrder", 1}, {"envmap", 1}, {"deepImageState", 1}, {"tiledesc", 9}, {"rational", 8},
+      {"keycode", 28}, {"timecode", 8}, {"chromaticities", 32}, {"m33f", 36}, {"m44f", 64},
+      {"m33d", 72}, {"m44d", 128}};
+  if (const auto it = kFixed.find(type); it != kFixed.end()) return it->second;
+  if (type != "chlist" && type != "preview") return -1;
+  const auto start = in.tellg();
+  int64_t bytes = 0;
+  if (type == "preview") {
+    uint32_t wh[2] = {};
+    in.read(reinterpret_cast<char*>(wh), 8);
+    bytes = in ? 8 + 4 * int64_t{wh[0]} * wh[1] : kPastTheEnd;
+  } else {  // channels: a name (at most 255 characters and its NUL), then 16 bytes
+    for (int64_t name = 1; in && name > 0;) {
+      name = 0;
+      for (char c; in.get(c) && c != '\0' && name < 256;) ++name;
+      bytes += name + 1 + (name > 0 ? 16 : 0);
+      if (name > 0) in.seekg(16, std::ios::cur);
+    }
+    if (!in) bytes = kPastTheEnd;
+  }
+  in.clear();
+  in.seekg(start);
+  return bytes;
+}
+
 // OpenEXR allocates a header attribute at the size its header states before reading
 // it, so a 347-byte file whose string attribute claims 1.9 GB took 2 GB and 24 s to
 // fail (issue 19, fuzz/regressions/exr_fuzzer). Before OpenImageIO opens an OpenEXR
 // file (magic 76 2f 31 01; others pass), its header (every part's, for multi-part
-// files) is walked: an attribute larger than the rest of the file, a name or type
-// without its NUL, or a data window of more than kMaxImagePixels pixels is an Error
-// naming the file and the attribute.
+// files) is walked as OpenEXR reads it: an attribute larger than the rest of the file,
+// or whose stated size is not what OpenEXR reads for its type (ExrValueBytes: a
+// 262-byte file whose channel list was longer than stated was read by OpenEXR with a
+// 10065565-pixel wide data window the walk had not seen, fuzz/regressions/exr_fuzzer/
+// chlist_longer_than_stated.exr), a name or type without its NUL, or a data window
+// or tiles beyond the bounds above is an Error naming the file and the attribute.
 void CheckExrHeader(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   char magic[4] = {};
@@ -87,6 +128,11 @@ void CheckExrHeader(const fs::path& path) {
       if (size < 0 || size > rest) {
         throw Error(fmt::format("{}: EXR attribute '{}' ({}) claims {} bytes, but the file has {} left",
                                 path.string(), name, type, size, rest));
+      }
+      if (const int64_t bytes = ExrValueBytes(in, type, size); bytes >= 0 && bytes != size) {
+        throw Error(fmt::format("{}: EXR attribute '{}' ({}) claims {} bytes, but its value {}", path.string(), name,
+                                type, size,
+                                bytes == kPastTheEnd ? "runs past the end of the file" : fmt::format("holds {}", bytes)));
       }
       if (name == "dataWindow" && type == "box2i" && size == 16) {
         int32_t box[4];

@@ -151,6 +151,21 @@ TEST(ImageIo, ExrAttributeLargerThanTheFileIsRefusedFirst) {
   EXPECT_NE(testing::ErrorOf([&] { ReadImage(regressions / "exr_fuzzer/wide_data_window.exr"); })
                 .find("wide_data_window.exr: the EXR data window claims 6553604x2 pixels (crease reads 1 to 32768 per side"),
             std::string::npos);
+  // The walk reads each value as OpenEXR does, not by the size the header states: a
+  // channel list longer than stated hid a 10065565-pixel wide data window from it.
+  EXPECT_NE(testing::ErrorOf([&] { ReadImage(regressions / "exr_fuzzer/chlist_longer_than_stated.exr"); })
+                .find("EXR attribute 'channels' (chlist) claims 55 bytes, but its value holds 99"),
+            std::string::npos);
+  {
+    std::string wrong = bytes;
+    const size_t c = wrong.find("compression");
+    ASSERT_NE(c, std::string::npos);
+    wrong[c + 2 * std::string("compression").size() + 2] = '\x02';  // its size, 1 for the type
+    std::ofstream(dir / "compression_size.exr", std::ios::binary) << wrong;
+    EXPECT_NE(testing::ErrorOf([&] { ReadImage(dir / "compression_size.exr"); })
+                  .find("'compression' (compression) claims 2 bytes, but its value holds 1"),
+              std::string::npos);
+  }
   // A tile of 65536² pixels: a `tiles` attribute put first in crease's own header.
   std::string tiled = bytes.substr(0, 8) + std::string("tiles\0tiledesc\0", 15);
   const uint32_t tile_desc[2] = {65536, 65536};
