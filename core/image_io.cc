@@ -80,7 +80,8 @@ int64_t ExrValueBytes(std::istream& in, const std::string& type, int64_t size) {
   if (type == "preview") {
     uint32_t wh[2] = {};
     in.read(reinterpret_cast<char*>(wh), 8);
-    bytes = in ? 8 + 4 * int64_t{wh[0]} * wh[1] : kPastTheEnd;
+    const uint64_t pixels = uint64_t{wh[0]} * wh[1];  // < 2^64; past 2^40 no file holds them
+    bytes = in && pixels < (uint64_t{1} << 40) ? 8 + 4 * static_cast<int64_t>(pixels) : kPastTheEnd;
   } else {  // channels: a name (at most 255 characters and its NUL), then 16 bytes
     for (int64_t name = 1; in && name > 0;) {
       name = 0;

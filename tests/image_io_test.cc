@@ -156,6 +156,10 @@ TEST(ImageIo, ExrAttributeLargerThanTheFileIsRefusedFirst) {
   EXPECT_NE(testing::ErrorOf([&] { ReadImage(regressions / "exr_fuzzer/chlist_longer_than_stated.exr"); })
                 .find("EXR attribute 'channels' (chlist) claims 55 bytes, but its value holds 99"),
             std::string::npos);
+  // A preview of 4294967279×2 pixels: 4·w·h overflowed 64 bits in the walk (UBSan).
+  EXPECT_NE(testing::ErrorOf([&] { ReadImage(regressions / "exr_fuzzer/preview_size_overflow.exr"); })
+                .find("(preview) claims 0 bytes, but its value runs past the end of the file"),
+            std::string::npos);
   {
     std::string wrong = bytes;
     const size_t c = wrong.find("compression");
