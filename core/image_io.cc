@@ -156,7 +156,7 @@ void CheckExrHeader(const fs::path& path) {
 }
 
 // libpng allocates a chunk at the length its header states before reading it (the
-// Debian build sets no limit), so a 200-byte PNG whose tEXt chunk claimed 2.1 GB
+// Debian build sets no limit), so a 163-byte PNG whose tEXt chunk claimed 2.1 GB
 // allocated 2.1 GB (issue 19, fuzz/regressions/png_fuzzer/chunk_claims_2gb.png).
 // Before OpenImageIO opens a PNG (its 8-byte signature; others pass), its chunks are
 // walked up to IEND: a chunk longer than the rest of the file is an Error naming the

@@ -181,7 +181,7 @@ TEST(ImageIo, ExrAttributeLargerThanTheFileIsRefusedFirst) {
             std::string::npos);
 }
 
-// Fuzzing (2026-12-05): a 200-byte PNG whose tEXt chunk claims 2.1 GB made libpng
+// Fuzzing (2026-12-05): a 163-byte PNG whose tEXt chunk claims 2.1 GB made libpng
 // allocate 2.1 GB; the chunk walk refuses a chunk longer than the rest of the file.
 TEST(ImageIo, PngChunkLargerThanTheFileIsRefusedFirst) {
   const fs::path bad = fs::path(CREASE_TEST_DIR) / "../fuzz/regressions/png_fuzzer/chunk_claims_2gb.png";
