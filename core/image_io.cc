@@ -135,14 +135,14 @@ void CheckExrHeader(const fs::path& path) {
                                 type, size,
                                 bytes == kPastTheEnd ? "runs past the end of the file" : fmt::format("holds {}", bytes)));
       }
-      if (name == "dataWindow" && type == "box2i" && size == 16) {
+      // ExrValueBytes has checked the sizes of box2i (16) and tiledesc (9) values.
+      if (name == "dataWindow" && type == "box2i") {
         int32_t box[4];
         in.read(reinterpret_cast<char*>(box), 16);
         CheckImageSize(path, "the EXR data window", int64_t{box[2]} - box[0] + 1, int64_t{box[3]} - box[1] + 1);
-      } else if (name == "tiles" && type == "tiledesc" && size == 9) {
+      } else if (name == "tiles" && type == "tiledesc") {
         uint32_t tile[2];
-        char mode = 0;
-        in.read(reinterpret_cast<char*>(tile), 8).get(mode);
+        in.read(reinterpret_cast<char*>(tile), 8).seekg(1, std::ios::cur);  // past the level mode
         if (tile[0] < 1 || tile[1] < 1 || int64_t{tile[0]} * tile[1] > kMaxExrTilePixels) {
           throw Error(fmt::format("{}: the EXR tiles claim {}x{} pixels each (1 to {} are read)", path.string(),
                                   tile[0], tile[1], kMaxExrTilePixels));

@@ -123,19 +123,15 @@ TEST(ImageIo, ExrPngRoundTripsSrgbAndErrors) {
 // Issue 19: a 347-byte EXR whose capDate attribute claims 1.9 GB made OpenEXR allocate
 // 2 GB (24 s) before failing; the header walk refuses it before OpenImageIO opens it.
 TEST(ImageIo, ExrAttributeLargerThanTheFileIsRefusedFirst) {
-  const fs::path bad = fs::path(CREASE_TEST_DIR) / "../fuzz/regressions/exr_fuzzer/attribute_claims_2gb.exr";
-  const std::string e = testing::ErrorOf([&] { ReadImage(bad); });
+  const fs::path regressions = fs::path(CREASE_TEST_DIR) / "../fuzz/regressions";
+  const std::string e = testing::ErrorOf([&] { ReadImage(regressions / "exr_fuzzer/attribute_claims_2gb.exr"); });
   EXPECT_NE(e.find("attribute_claims_2gb.exr: EXR attribute 'capDate' (string) claims 1946157075 bytes"),
             std::string::npos) << e;
   // A data window beyond 10^8 pixels: a valid file with its dataWindow's xMax raised.
   const fs::path dir = ::crease::testing::TestDir() / "crease_image_io";
   const fs::path good = dir / "window.exr";
   WriteImage(good, RandomImage(4, 4, 1, 3));
-  std::string bytes;
-  {
-    std::ifstream in(good, std::ios::binary);
-    bytes.assign(std::istreambuf_iterator<char>(in), {});
-  }
+  std::string bytes = ReadFileToString(good);
   const size_t at = bytes.find("dataWindow");
   ASSERT_NE(at, std::string::npos);
   const size_t x_max = at + std::string("dataWindow").size() + 1 + std::string("box2i").size() + 1 + 4 + 8;
@@ -147,7 +143,6 @@ TEST(ImageIo, ExrAttributeLargerThanTheFileIsRefusedFirst) {
   EXPECT_EQ(ReadImage(good).rows, 4);  // the walk accepts crease's own files
   // Fuzzing (2026-12-05): a 298-byte EXR whose data window is 6553604×2 (13 M pixels,
   // within 10^8) made OpenEXR allocate 5 GB of row buffers; each side is bounded too.
-  const fs::path regressions = fs::path(CREASE_TEST_DIR) / "../fuzz/regressions";
   EXPECT_NE(testing::ErrorOf([&] { ReadImage(regressions / "exr_fuzzer/wide_data_window.exr"); })
                 .find("wide_data_window.exr: the EXR data window claims 6553604x2 pixels (crease reads 1 to 32768 per side"),
             std::string::npos);
@@ -203,7 +198,6 @@ TEST(ImageIo, PngChunkLargerThanTheFileIsRefusedFirst) {
 // PNG (OIIO's PNG writer does not report the failed write). A file size limit
 // (RLIMIT_FSIZE, each ctest test is its own process) stands in for the full disk:
 // every format must throw, naming the file, and leave neither it nor a temporary.
-
 TEST(ImageIo, FullDiskIsAnErrorAndLeavesNoFile) {
   const fs::path dir = ::crease::testing::TestDir() / "crease_image_full";
   fs::create_directories(dir);
