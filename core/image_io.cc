@@ -106,16 +106,13 @@ int64_t ExrValueBytes(std::istream& in, const std::string& type, int64_t size) {
 // 10065565-pixel wide data window the walk had not seen, fuzz/regressions/exr_fuzzer/
 // chlist_longer_than_stated.exr), a name or type without its NUL, or a data window
 // or tiles beyond the bounds above is an Error naming the file and the attribute.
-void CheckExrHeader(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  char magic[4] = {};
+// `in` stands after the magic; `file_size` is the file's length.
+void CheckExrHeader(std::istream& in, const fs::path& path, int64_t file_size) {
   uint32_t version = 0;
-  if (!in.read(magic, 4) || std::memcmp(magic, "\x76\x2f\x31\x01", 4) != 0) return;
   if (!in.read(reinterpret_cast<char*>(&version), 4)) {
     throw Error(fmt::format("{}: EXR file ends in its version field", path.string()));
   }
   const bool multipart = (version & 0x1000u) != 0;
-  const int64_t file_size = static_cast<int64_t>(fs::file_size(path));
   for (bool part_empty = false; !part_empty;) {
     part_empty = true;
     for (std::string name; !(name = ReadExrHeaderString(in, path, "name")).empty();) {
@@ -161,11 +158,8 @@ void CheckExrHeader(const fs::path& path) {
 // Before OpenImageIO opens a PNG (its 8-byte signature; others pass), its chunks are
 // walked up to IEND: a chunk longer than the rest of the file is an Error naming the
 // file and the chunk. A file that ends between chunks is left to libpng's error.
-void CheckPngChunks(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  char signature[8] = {};
-  if (!in.read(signature, 8) || std::memcmp(signature, "\x89PNG\r\n\x1a\n", 8) != 0) return;
-  const int64_t file_size = static_cast<int64_t>(fs::file_size(path));
+// `in` stands after the signature; `file_size` is the file's length.
+void CheckPngChunks(std::istream& in, const fs::path& path, int64_t file_size) {
   for (unsigned char head[8]; in.read(reinterpret_cast<char*>(head), 8);) {
     const int64_t length = int64_t{head[0]} << 24 | int64_t{head[1]} << 16 | int64_t{head[2]} << 8 | head[3];
     std::string type(head + 4, head + 8);
@@ -177,6 +171,23 @@ void CheckPngChunks(const fs::path& path) {
     }
     if (type == "IEND") return;
     in.seekg(length + 4, std::ios::cur);
+  }
+}
+
+// Opens the file once and walks its header if it is an OpenEXR (magic 76 2f 31 01) or
+// PNG (8-byte signature) file; other formats pass to OpenImageIO unchecked.
+void CheckHeaderBeforeDecoding(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  char magic[8] = {};
+  in.read(magic, 8);
+  const std::streamsize got = in.gcount();
+  const int64_t file_size = static_cast<int64_t>(fs::file_size(path));
+  if (got >= 4 && std::memcmp(magic, "\x76\x2f\x31\x01", 4) == 0) {
+    in.clear();
+    in.seekg(4);
+    CheckExrHeader(in, path, file_size);
+  } else if (got == 8 && std::memcmp(magic, "\x89PNG\r\n\x1a\n", 8) == 0) {
+    CheckPngChunks(in, path, file_size);
   }
 }
 
@@ -198,8 +209,7 @@ void Encode(OIIO::ImageOutput& out, const std::string& name, const OIIO::ImageSp
 
 cv::Mat ReadImage(const fs::path& path, bool srgb) {
   RequireReadableFile(path);
-  CheckExrHeader(path);
-  CheckPngChunks(path);
+  CheckHeaderBeforeDecoding(path);
   auto in = OIIO::ImageInput::open(path.string());
   if (!in) {
     throw Error(fmt::format("{}: cannot read image: {}", path.string(), OIIO::geterror()));
