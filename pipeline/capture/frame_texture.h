@@ -59,7 +59,7 @@
 //      rasterised into the depth buffer (no near-plane clipping).
 //   4. T^t is blended with the previous frames' blend where both saw the texel,
 //      T_s^t = (1 − a) T^t + a T_s^{t−1} (BlendTextureHistory; temporal_weight
-//      a = 0.5 by default, 0 = the paper). Sec. 5.1 asks for a temporally stable
+//      a = 0.7 by default since crease 0.4.6, 0.5 before; 0 = the paper). Sec. 5.1 asks for a temporally stable
 //      texture and gets it from the flow refinement alone, which leaves the camera's
 //      noise in it, and the fern features (pixel differences, Sec. 4.3) flip on it.
 //      The blend lowers the noise's variance to (1 − a)/(1 + a) of a frame's (1/3)
@@ -69,8 +69,12 @@
 //      0.950 ± 0.027 at a = 0.5, and its wrinkle-region correlation with D* 0.148 →
 //      0.174; with the flattened-texture training levers (ratio, α = 0.002, G 1 mm)
 //      0.729 ± 0.157 → 0.867 ± 0.089 (a = 0.5) and 0.929 ± 0.060 (a = 0.7), the
-//      correlation 0.371 → 0.389 / 0.394. About 1 ms per frame at R = 1024
-//      (bench/frame_texture_bench BM_BlendTextureHistory, 2 cores).
+//      correlation 0.371 → 0.389 / 0.394. On the quickstart's novel actor (seed 101,
+//      211 frames, tracker's own landmarks, rung R3) a = 0.5 / 0.7 / 0.8 give a still
+//      face of 0.881 / 0.926 / 0.941 and a wrinkle-region correlation of 0.082 / 0.085 /
+//      0.089, hence the default 0.7 (lag 2.3 frames, noise variance 0.18 of a frame's).
+//      About 1 ms per frame at R = 1024 (bench/frame_texture_bench
+//      BM_BlendTextureHistory, 2 cores).
 #pragma once
 
 #include <cstdint>
@@ -105,7 +109,7 @@ struct FrameTextureOptions {
   // passes over the R×R masks.
   int erode_seen_texels = 0;
   // a of Difference 4: the previous frames' share of T^t, in [0, 0.95]. 0 = off (the paper).
-  double temporal_weight = 0.5;
+  double temporal_weight = 0.7;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
