@@ -548,7 +548,8 @@ def figure_sweep(exp, spec):
         ax.set_xticklabels([fmt_value(v) for v in xs])
         ax.set_xlabel(x)
         ax.set_ylabel(unit_of(y) or label_of(y))
-        ax.set_title(y)
+        # A long metric name would run into its neighbour's title: break it at its last dot.
+        ax.set_title(y if len(y) <= 30 else "\n".join(y.rsplit(".", 1)), fontsize=9)
         ax.grid(alpha=0.3)
     return fig, f"mean ± std over seeds of the runs that vary `{x}`"
 
