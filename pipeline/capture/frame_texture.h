@@ -72,7 +72,10 @@
 //      correlation 0.371 → 0.389 / 0.394. On the quickstart's novel actor (seed 101,
 //      211 frames, tracker's own landmarks, rung R3) a = 0.5 / 0.7 / 0.8 give a still
 //      face of 0.881 / 0.926 / 0.941 and a wrinkle-region correlation of 0.082 / 0.085 /
-//      0.089, hence the default 0.7 (lag 2.3 frames, noise variance 0.18 of a frame's).
+//      0.089, hence the default 0.7 (lag 2.3 frames, noise variance 0.18 of a frame's);
+//      the 3-seed ladder above at a = 0.7 with the paper's settings: still face R2
+//      0.971 ± 0.018, R3 0.936 ± 0.027 (0.950 / 0.920 at a = 0.5), correlation R2 0.16,
+//      R3 0.06 (0.17 / 0.07).
 //      About 1 ms per frame at R = 1024 (bench/frame_texture_bench
 //      BM_BlendTextureHistory, 2 cores).
 #pragma once
