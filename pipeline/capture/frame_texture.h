@@ -59,9 +59,10 @@
 //      rasterised into the depth buffer (no near-plane clipping).
 //   4. T^t is blended with the previous frames' blend where both saw the texel,
 //      T_s^t = (1 − a) T^t + a T_s^{t−1} (BlendTextureHistory; temporal_weight
-//      a = 0.7 by default since crease 0.4.6, 0.5 before; 0 = the paper). Sec. 5.1 asks for a temporally stable
-//      texture and gets it from the flow refinement alone, which leaves the camera's
-//      noise in it, and the fern features (pixel differences, Sec. 4.3) flip on it.
+//      a = 0.7 by default since crease 0.4.6, 0.5 before; 0 = the paper). Sec. 5.1
+//      asks for a temporally stable texture and gets it from the flow refinement
+//      alone, which leaves the camera's noise in it, and the fern features (pixel
+//      differences, Sec. 4.3) flip on it.
 //      The blend lowers the noise's variance to (1 − a)/(1 + a) of a frame's (1/3)
 //      and lags a change of the face by a/(1 − a) frames (1). Measured (issue 17's
 //      ladder, quick profile, rung R2, 3 seeds, lined novel actors: age ≥ 0.7,
@@ -75,9 +76,8 @@
 //      0.089, hence the default 0.7 (lag 2.3 frames, noise variance 0.18 of a frame's);
 //      the 3-seed ladder above at a = 0.7 with the paper's settings: still face R2
 //      0.971 ± 0.018, R3 0.936 ± 0.027 (0.950 / 0.920 at a = 0.5), correlation R2 0.16,
-//      R3 0.06 (0.17 / 0.07).
-//      About 1 ms per frame at R = 1024 (bench/frame_texture_bench
-//      BM_BlendTextureHistory, 2 cores).
+//      R3 0.06 (0.17 / 0.07). About 1 ms per frame at R = 1024
+//      (bench/frame_texture_bench BM_BlendTextureHistory, 2 cores).
 #pragma once
 
 #include <cstdint>
