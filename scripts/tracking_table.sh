@@ -6,8 +6,8 @@
 #
 #   scripts/tracking_table.sh [ACTOR_SEED ...]      (default: 201 202 203)
 #
-# Trains the regressor with `crease train-tracker` defaults (12 actors x 40 renders,
-# seeds 1000..1011; the novel actors' seeds do not overlap), renders each sequence at
+# Trains the regressor with `crease train-tracker` defaults (36 actors x 40 renders since 0.4.7,
+# seeds 1000..1035; the novel actors' seeds do not overlap), renders each sequence at
 # 640x480 under the studio light (talking 90 frames, fast-motion 60 frames with motion
 # blur), tracks it with each source and prints a Markdown table: the mean over actors of
 # each actor's mean over tracked frames, +- the standard deviation over actors, and the

@@ -44,7 +44,7 @@ void AddTrainTrackerCommand(CLI::App& app) {
   cmd->add_option("--save-data", a->save_data, "Also write the generated renders (train/, test/) to this folder");
   cmd->add_option("--sequence", a->sequence,
                   "Also track a labelled folder as a video (frames in name order) and report the error");
-  cmd->add_option("--actors", a->actors, "Training actors (default 12)");
+  cmd->add_option("--actors", a->actors, "Training actors (default 36)");
   cmd->add_option("--test-actors", a->test_actors, "Held-out actors (default 3)");
   cmd->add_option("--renders", a->renders, "Renders per actor (default 40)");
   cmd->add_option("--size", a->size, "Image size WIDTHxHEIGHT (default 320x240)");
