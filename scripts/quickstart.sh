@@ -54,7 +54,7 @@ step "training scans: 4 actors, a neutral and 4 wrinkle expressions each, 3 came
 step "training the detail model (paper Sec. 4; about 2 min)"
 "$crease" train --scans "$out/scans" --out "$out/model.cdm"
 "$crease" model info "$out/model.cdm"
-step "training the global tracker's landmark regressor on studio renders (36 actors, about 5 min)"
+step "training the global tracker's landmark regressor on studio renders (36 actors, about 3 min)"
 "$crease" train-tracker --rig "$out/head.crig" -o "$out/tracker.ctrk"
 step "a novel actor (seed 101, older: deep lines): 4 s of wrinkle workout, then 2.5 s of talking, with ground truth (about 2 min)"
 "$crease" synth actor --rig "$out/head.crig" --seed 101 --set age_min=0.8 -o "$out/actor101.json"

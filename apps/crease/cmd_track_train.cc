@@ -8,6 +8,8 @@
 #include <memory>
 #include <optional>
 
+#include <fmt/format.h>
+
 #include "apps/crease/commands.h"
 #include "core/error.h"
 #include "core/face_rig.h"
@@ -44,10 +46,12 @@ void AddTrainTrackerCommand(CLI::App& app) {
   cmd->add_option("--save-data", a->save_data, "Also write the generated renders (train/, test/) to this folder");
   cmd->add_option("--sequence", a->sequence,
                   "Also track a labelled folder as a video (frames in name order) and report the error");
-  cmd->add_option("--actors", a->actors, "Training actors (default 36)");
-  cmd->add_option("--test-actors", a->test_actors, "Held-out actors (default 3)");
-  cmd->add_option("--renders", a->renders, "Renders per actor (default 40)");
-  cmd->add_option("--size", a->size, "Image size WIDTHxHEIGHT (default 320x240)");
+  const TrackerTrainingOptions defaults;  // the help states the defaults it does not repeat
+  cmd->add_option("--actors", a->actors, fmt::format("Training actors (default {})", defaults.train_actors));
+  cmd->add_option("--test-actors", a->test_actors, fmt::format("Held-out actors (default {})", defaults.test_actors));
+  cmd->add_option("--renders", a->renders, fmt::format("Renders per actor (default {})", defaults.renders_per_actor));
+  cmd->add_option("--size", a->size,
+                  fmt::format("Image size WIDTHxHEIGHT (default {}x{})", defaults.width, defaults.height));
   cmd->add_option("--seed", a->seed, "Seed of actors, renders, augmentation and features")->capture_default_str();
   cmd->add_option("--config", a->config,
                   "Options (YAML; keys: pipeline/capture/tracker_training.h TrackerTrainingOptions and "
