@@ -47,6 +47,7 @@ void CaptureEvalOptions::VisitFields(OptionVisitor& v) {
   v.Section("appearance", appearance);
   v.Field("surface_every", surface_every);
   v.Field("band_mm", band_mm);
+  v.Field("normal_band_low_mm", normal_band_low_mm);
   v.Field("detail_truth", detail_truth);
   v.Field("truth_maps_dir", truth_maps_dir);
   v.Field("registered_truth", registered_truth);
@@ -68,6 +69,7 @@ void CaptureEvalOptions::Check() const {
   appearance.Check();
   CheckGe(o, "surface_every", surface_every, 0);
   CheckGt(o, "band_mm", band_mm, 0.0);
+  CheckGt(o, "normal_band_low_mm", normal_band_low_mm, 0.0);
   CheckGt(o, "surface_max_distance_mm", surface_max_distance_mm, 0.0);
   CheckGe(o, "surface_mesh_resolution", surface_mesh_resolution, 8);
   CheckGe(o, "offset_search_mm", offset_search_mm, 0.0);
@@ -127,6 +129,13 @@ json SurfaceJson(const SurfaceError& s) {
           {"wrinkle_samples", s.wrinkle_samples},
           {"wrinkle_distance_mm", s.wrinkle_distance_mm},
           {"wrinkle_normal_deg", s.wrinkle_normal_deg}};
+}
+
+json BandNormalsJson(const BandNormals& b) {
+  return {{"coarse_deg", b.coarse_deg},
+          {"coarse_mesoscopic_deg", b.meso_deg},
+          {"detail_deg", b.detail_deg},
+          {"full_deg", b.full_deg}};
 }
 
 double Amp(const MapComparison& c) { return c.reference_rms_mm > 0 ? c.extracted_rms_mm / c.reference_rms_mm : 0.0; }
@@ -573,6 +582,31 @@ SurfaceError MeasureSurface(const TriMesh& h, const RayCaster& truth, double max
   return e;
 }
 
+double BandNormalError(const cv::Mat& estimate, const cv::Mat& truth, const cv::Mat& mask, double mm_per_texel) {
+  Require(estimate.type() == CV_32F && truth.type() == CV_32F && mask.type() == CV_8U &&
+              estimate.size() == truth.size() && mask.size() == truth.size(),
+          "BandNormalError: two CV_32F maps and a CV_8U mask of one size");
+  const double inv = 0.5 / mm_per_texel;  // central difference, per mm
+  double sum = 0;
+  int64_t n = 0;
+  for (int j = 1; j + 1 < truth.rows; ++j) {
+    const uint8_t* m = mask.ptr<uint8_t>(j);
+    for (int i = 1; i + 1 < truth.cols; ++i) {
+      if (!m[i]) continue;
+      // The normal of z = d(x, y) is (−d_x, −d_y, 1), unnormalised.
+      auto normal = [&](const cv::Mat& d) {
+        return Eigen::Vector3d(-(d.at<float>(j, i + 1) - d.at<float>(j, i - 1)) * inv,
+                               -(d.at<float>(j + 1, i) - d.at<float>(j - 1, i)) * inv, 1.0);
+      };
+      const Eigen::Vector3d a = normal(estimate), b = normal(truth);
+      if (!a.allFinite() || !b.allFinite()) continue;
+      sum += std::atan2(a.cross(b).norm(), a.dot(b));
+      ++n;
+    }
+  }
+  return n > 0 ? sum / n * 180.0 / M_PI : 0.0;
+}
+
 namespace {
 
 // The constants of one evaluation: the capture and the dataset, the rigs and their
@@ -586,6 +620,11 @@ struct CaptureEvalContext {
 
   // The dataset's image of frame `index`.
   fs::path FramePath(int index) const { return info.FramePath(index); }
+  // The band of the band normal error from a map's wrinkle band (WrinkleBand with
+  // band_mask): its relief finer than normal_band_low_mm removed.
+  cv::Mat NormalBand(const cv::Mat& wrinkle_band) const {
+    return wrinkle_band - WrinkleBand(wrinkle_band, normal_low_mask);
+  }
   // The fraction of the face-chart vertices visible in the ground truth (`vertex_visible`: #V).
   double VisibleFraction(const std::vector<char>& vertex_visible) const {
     int seen = 0;
@@ -612,6 +651,7 @@ struct CaptureEvalContext {
   cv::Mat coverage, wrinkle_mask, offset_mask;
   double mm_per_texel = 0;
   WrinkleBandMask band_mask;
+  WrinkleBandMask normal_low_mask;  // the band normal error's lower edge (normal_band_low_mm)
   int offset_shift = 0;  // texels, the wrinkle offset's search range
   // The truth moves with the actor's personal rig (its expression deviations),
   // which the tracking rig (the capture's) cannot represent exactly.
@@ -622,7 +662,9 @@ struct CaptureEvalContext {
   // The true high-resolution surface and H^t's builder (surface_every > 0).
   std::optional<ActorModel> actor;
   std::unique_ptr<HifiMeshBuilder> hifi;
-  cv::Mat meso;
+  cv::Mat meso;       // the capture's D^HF (zero when it wrote none)
+  cv::Mat meso_band;  // NormalBand(D^HF)
+  MapComparison meso_truth;  // D^HF against the true mesoscopic layer (texels 0: not known)
   // The truth of D^t when it is Sec. 4.1's detail; null: the wrinkle-layer maps.
   std::unique_ptr<DetailTruth> detail_truth;
   std::vector<int> frames;  // the capture's frames evaluated
@@ -633,6 +675,7 @@ struct CaptureEvalContext {
   void SetUpFaceChart();
   void SetUpTruthMotion();
   void SetUpSurfaceTruth();
+  void ReadMesoscopic();
   void SelectFrames();
   void SetUpDetailTruth();
 };
@@ -644,6 +687,7 @@ CaptureEvalContext::CaptureEvalContext(const fs::path& capture_dir, const fs::pa
   SetUpFaceChart();
   SetUpTruthMotion();
   SetUpSurfaceTruth();
+  ReadMesoscopic();
   SelectFrames();
   SetUpDetailTruth();
   if (!options.truth_maps_dir.empty()) fs::create_directories(options.truth_maps_dir);
@@ -679,6 +723,7 @@ void CaptureEvalContext::SetUpFaceChart() {
   wrinkle_mask = ValidRegionMask(rig.regions, options.wrinkle_regions, R, coverage);
   mm_per_texel = std::max(MmPerTexel(face_mesh, R), 1e-9);
   band_mask = MakeWrinkleBandMask(coverage, options.band_mm / mm_per_texel);
+  normal_low_mask = MakeWrinkleBandMask(coverage, options.normal_band_low_mm / mm_per_texel);
   offset_mask = ValidRegionMask(rig.regions, {options.offset_region}, R, coverage);
   offset_shift = static_cast<int>(std::lround(options.offset_search_mm / mm_per_texel));
 }
@@ -701,8 +746,17 @@ void CaptureEvalContext::SetUpSurfaceTruth() {
   HifiMeshOptions ho;
   ho.hifi_mesh_resolution = options.surface_mesh_resolution;
   hifi = std::make_unique<HifiMeshBuilder>(rig, ho);
+}
+
+void CaptureEvalContext::ReadMesoscopic() {
   const fs::path meso_path = capture / "maps" / "mesoscopic.exr";
   meso = fs::is_regular_file(meso_path) ? ReadMap(meso_path, R) : cv::Mat::zeros(R, R, CV_32F);
+  meso_band = NormalBand(WrinkleBand(meso, band_mask));
+  const fs::path true_path = dataset / "maps" / "mesoscopic_displacement.exr";
+  if (corr.same_uv && fs::is_regular_file(true_path)) {
+    const cv::Mat true_band = NormalBand(WrinkleBand(ReadMap(true_path, R, /*resample=*/true), band_mask));
+    meso_truth = CompareMaps(meso_band, true_band, wrinkle_mask);
+  }
 }
 
 void CaptureEvalContext::SelectFrames() {
@@ -1055,10 +1109,25 @@ void PoolRegisteredTruth(const CaptureEvalContext& c, const RigTruth& t, const C
   st->reg_truth_layer_band.Add(reg[2], Lb, c.wrinkle_mask);
 }
 
-// D^t of one frame and its band minus the truth's (both empty when D^t is not compared).
+// D^t of one frame, its truth D* (empty unless the detail truth is Sec. 4.1's) and
+// D^t's band minus the truth's (all empty when D^t is not compared).
 struct FrameDisplacement {
-  cv::Mat D, band_err;
+  cv::Mat D, truth, band_err;
 };
+
+// The band normal error of L~^t, L~^t + D^HF, L~^t + D^t and H^t against D*, from
+// the wrinkle bands of D^t (Db) and of D* (Gb): WrinkleBand is linear, so the
+// band of D^t + D^HF is the sum of the bands.
+BandNormals MeasureBandNormals(const CaptureEvalContext& c, const cv::Mat& Db, const cv::Mat& Gb) {
+  const cv::Mat d = c.NormalBand(Db), g = c.NormalBand(Gb);
+  const cv::Mat zero = cv::Mat::zeros(g.size(), CV_32F);
+  BandNormals b;
+  b.coarse_deg = BandNormalError(zero, g, c.wrinkle_mask, c.mm_per_texel);
+  b.meso_deg = BandNormalError(c.meso_band, g, c.wrinkle_mask, c.mm_per_texel);
+  b.detail_deg = BandNormalError(d, g, c.wrinkle_mask, c.mm_per_texel);
+  b.full_deg = BandNormalError(d + c.meso_band, g, c.wrinkle_mask, c.mm_per_texel);
+  return b;
+}
 
 // D^t against the truth: over the face and the wrinkle regions, raw and in the
 // wrinkle band; the wrinkle offset, the pools, the jitter and the still face; the
@@ -1083,6 +1152,11 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
   e->d_face_band = CompareMaps(Db, Gb, c.coverage);
   e->d_wrinkle_band = CompareMaps(Db, Gb, c.wrinkle_mask);
   d.band_err = Db - Gb;
+  if (c.detail_truth) {
+    d.truth = G;
+    e->band_normals = MeasureBandNormals(c, Db, Gb);
+    e->has_band_normals = true;
+  }
   MeasureWrinkleOffset(c, Db, Gb, e);
   PoolDisplacement(c, d.D, G, Db, Gb, layer, *e, st);
   if (st->registration && e->d_wrinkle_band.reference_rms_mm >= c.options.active_reference_rms_mm) {
@@ -1094,9 +1168,10 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
 }
 
 // H^t against the true high-resolution surface (every surface_every-th tracked
-// frame), for L~^t alone, with D^HF, and with D^t + D^HF.
+// frame), for L~^t alone, with D^HF, with D^t + D^HF, and with D* + D^HF when D*
+// is known (`detail`: D^t and D*, either empty when absent).
 void EvaluateFrameSurface(const CaptureEvalContext& c, int tracked_count, const RigTruth& t,
-                          const MatX3d& refined_aligned, const cv::Mat& D, FrameCaptureEval* e) {
+                          const MatX3d& refined_aligned, const FrameDisplacement& detail, FrameCaptureEval* e) {
   if (!c.actor || (tracked_count - 1) % c.options.surface_every != 0) return;
   TriMesh truth_hires = c.actor->Frame(t.beta, true).hires;
   truth_hires.V = Transform(t.truth.cam_from_head, truth_hires.V);
@@ -1105,8 +1180,14 @@ void EvaluateFrameSurface(const CaptureEvalContext& c, int tracked_count, const 
   const double max_mm = c.options.surface_max_distance_mm;
   e->surface_coarse = MeasureSurface(c.hifi->Build(refined_aligned, zero), caster, max_mm, c.wrinkle_mask);
   e->surface_meso = MeasureSurface(c.hifi->Build(refined_aligned, c.meso), caster, max_mm, c.wrinkle_mask);
-  if (!D.empty()) {
-    e->surface_full = MeasureSurface(c.hifi->Build(refined_aligned, D + c.meso), caster, max_mm, c.wrinkle_mask);
+  if (!detail.D.empty()) {
+    e->surface_full =
+        MeasureSurface(c.hifi->Build(refined_aligned, detail.D + c.meso), caster, max_mm, c.wrinkle_mask);
+  }
+  if (!detail.truth.empty()) {
+    e->surface_truth =
+        MeasureSurface(c.hifi->Build(refined_aligned, detail.truth + c.meso), caster, max_mm, c.wrinkle_mask);
+    e->has_surface_truth = true;
   }
   e->has_surface = true;
 }
@@ -1131,7 +1212,7 @@ FrameCaptureEval EvaluateFrame(const CaptureEvalContext& c, int index, FrameLoop
   const RigTruth t = ReadRigTruth(c, index);
   FrameTrackingVectors v = EvaluateFrameTracking(c, index, arrays, t, st, &e);
   FrameDisplacement d = EvaluateFrameDisplacement(c, index, arrays, t, st, &e);
-  EvaluateFrameSurface(c, st->tracked_count, t, v.refined_aligned, d.D, &e);
+  EvaluateFrameSurface(c, st->tracked_count, t, v.refined_aligned, d, &e);
   st->previous = {index, std::move(v.err_coarse), std::move(v.err_refined), std::move(d.band_err), std::move(d.D),
                   t.beta};
   return e;
@@ -1227,12 +1308,33 @@ void AverageDisplacementAndSurface(CaptureEvalSummary* s) {
       Accumulate(e.surface_meso, &s->surface_meso);
       Accumulate(e.surface_full, &s->surface_full);
     }
+    if (e.has_surface_truth) {
+      ++s->surface_truth_frames;
+      Accumulate(e.surface_truth, &s->surface_truth);
+    }
   }
   if (d_jitter_frames > 0) s->d_jitter_mm /= d_jitter_frames;
   if (s->still_pairs > 0) s->d_still_correlation /= s->still_pairs;
   Divide(s->surface_frames, &s->surface_coarse);
   Divide(s->surface_frames, &s->surface_meso);
   Divide(s->surface_frames, &s->surface_full);
+  Divide(s->surface_truth_frames, &s->surface_truth);
+}
+
+// The band normal errors' means over the active frames (as the pooled displacement metrics).
+void AverageBandNormals(const CaptureEvalOptions& o, CaptureEvalSummary* s) {
+  BandNormals& b = s->band_normals;
+  for (const FrameCaptureEval& e : s->per_frame) {
+    if (!e.has_band_normals || e.d_wrinkle_band.reference_rms_mm < o.active_reference_rms_mm) continue;
+    ++s->band_normal_frames;
+    b.coarse_deg += e.band_normals.coarse_deg;
+    b.meso_deg += e.band_normals.meso_deg;
+    b.detail_deg += e.band_normals.detail_deg;
+    b.full_deg += e.band_normals.full_deg;
+  }
+  if (s->band_normal_frames == 0) return;
+  const double n = s->band_normal_frames;
+  b = {b.coarse_deg / n, b.meso_deg / n, b.detail_deg / n, b.full_deg / n};
 }
 
 // The summary: the per-frame results reduced, the pools and meters read out, and
@@ -1253,6 +1355,8 @@ CaptureEvalSummary ReduceSummary(const CaptureEvalContext& c, const FrameLoopSta
   s.lk_truth = st.lk_meter.Result();
   AverageTracking(&s);
   AverageDisplacementAndSurface(&s);
+  AverageBandNormals(c.options, &s);
+  s.mesoscopic = c.meso_truth;
   s.active_frames = st.active_frames;
   s.layer_active_frames = st.layer_active_frames;
   s.d_face = st.pooled_face.Result();
@@ -1373,6 +1477,12 @@ std::string CaptureEvalSummary::ToJson() const {
                   {"coarse", SurfaceJson(surface_coarse)},
                   {"coarse_mesoscopic", SurfaceJson(surface_meso)},
                   {"full", SurfaceJson(surface_full)}};
+  if (surface_truth_frames > 0) j["surface"]["true_detail"] = SurfaceJson(surface_truth);  // else absent
+  if (band_normal_frames > 0) {  // else absent
+    j["surface"]["band"] = BandNormalsJson(band_normals);
+    j["surface"]["band"]["frames"] = band_normal_frames;
+  }
+  if (mesoscopic.texels > 0) j["surface"]["mesoscopic"] = ComparisonJson(mesoscopic);  // else absent
   j["speed"] = {{"fps", fps},
                 {"tracking_share", tracking_share},
                 {"detail_share", detail_share},
@@ -1405,10 +1515,12 @@ std::string CaptureEvalSummary::ToJson() const {
           f["displacement"]["offset_correlation"] = e.d_offset_correlation;
         }
       }
+      if (e.has_band_normals) f["band_normals"] = BandNormalsJson(e.band_normals);
       if (e.has_surface) {
         f["surface"] = {{"coarse", SurfaceJson(e.surface_coarse)},
                         {"coarse_mesoscopic", SurfaceJson(e.surface_meso)},
                         {"full", SurfaceJson(e.surface_full)}};
+        if (e.has_surface_truth) f["surface"]["true_detail"] = SurfaceJson(e.surface_truth);
       }
     }
     pf.push_back(f);
@@ -1556,7 +1668,34 @@ std::string CaptureEvalSummary::ToMarkdown() const {
       o << fmt::format("| {} | {:.2f} | {:.3f} | {:.2f} | {:.3f} |\n", name, e.normal_deg, e.distance_mm,
                        e.wrinkle_normal_deg, e.wrinkle_distance_mm);
     }
+    if (surface_truth_frames > 0) {
+      o << fmt::format("| L~^t + D* + D^HF (the true detail: a perfect regressor) | {:.2f} | {:.3f} | {:.2f} | {:.3f} |\n",
+                       surface_truth.normal_deg, surface_truth.distance_mm, surface_truth.wrinkle_normal_deg,
+                       surface_truth.wrinkle_distance_mm);
+    }
     o << "\n";
+  }
+  if (band_normal_frames > 0) {
+    const BandNormals& b = band_normals;
+    o << fmt::format("## Normal error in the wrinkle band, wrinkle regions, {} frames with wrinkles\n\n"
+                     "The layers' relief against D* between the band's edges (relief finer than the lower edge and "
+                     "broader than the wrinkle band left out), as height fields on the chart: the wrinkles' share of "
+                     "the normal error, which the surface measure above mixes with the pores, the static shape and the "
+                     "tracker's error (D* itself scores 0).\n\n",
+                     band_normal_frames);
+    o << "| layers | normal error, deg | against L~^t |\n|---|---|---|\n";
+    for (const auto& [name, deg] : {std::pair<const char*, double>{"L~^t (no detail)", b.coarse_deg},
+                                    {"L~^t + D^HF", b.meso_deg},
+                                    {"L~^t + D^t", b.detail_deg},
+                                    {"H^t = L~^t + D^t + D^HF", b.full_deg}}) {
+      o << fmt::format("| {} | {:.2f} | {:.2f} |\n", name, deg, b.coarse_deg > 0 ? deg / b.coarse_deg : 0.0);
+    }
+    o << "\n";
+  }
+  if (mesoscopic.texels > 0) {
+    o << fmt::format("D^HF (Sec. 5.3) against the actor's true mesoscopic layer in the same band, wrinkle regions: "
+                     "correlation {:.3f}, amplitude ratio {:.2f}\n\n",
+                     mesoscopic.correlation, Amp(mesoscopic));
   }
   if (fps > 0) {
     o << fmt::format("## Speed\n\n{:.1f} frames per second (file I/O excluded); tracking {:.0f} %, detail {:.0f} % "

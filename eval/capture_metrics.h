@@ -24,7 +24,14 @@
 //                        from the dataset's actor: distance along H^t's normal (mm)
 //                        and the angle between H^t's normal and the true surface's
 //                        normal (degrees), for three layers — L~^t alone, L~^t +
-//                        D^HF, and the full H^t = L~^t + D^t + D^HF;
+//                        D^HF, and the full H^t = L~^t + D^t + D^HF; and, when the
+//                        truth D* is known, L~^t + D* + D^HF: what a perfect
+//                        regressor would reach on this measure;
+//   band normals         the same layers' normal error in the wrinkle band
+//                        (BandNormalError), every frame with D^t and D*: the
+//                        surface measure above also counts the static shape, the
+//                        pores and the tracker's error, which no D^t can remove
+//                        (issue 17, section 3);
 //   speed                per-stage times and frames per second from the capture.
 //
 // Results: eval.json (summary and per-frame), eval_frames.csv, eval.md.
@@ -58,6 +65,10 @@ struct CaptureEvalOptions {
   int surface_every = 10;
   // σ of the wrinkle band, mm on the face (as TrainingOptions::validation_band_mm).
   double band_mm = 2.0;
+  // The band normal error's lower edge: relief finer than this Gaussian σ, mm on the
+  // face, is left out (the pores of the studio's surface and of D^HF, Sec. 5.3,
+  // whose own bandwidth is 0.3 mm), so the measure sees the wrinkles.
+  double normal_band_low_mm = 0.5;
   // The truth D^t is scored against (eval/detail_truth.h): "extraction" = Sec. 4.1's
   // detail, the wrinkle layer beyond the neutral plus the coarse expression's medium
   // band that the compatible rig gives up (what training extracts and the cascade
@@ -101,6 +112,23 @@ struct CaptureEvalOptions {
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
+};
+
+// Normal error in the wrinkle band (issue 17): the mean angle, degrees, between the
+// normals of two height fields over the chart, `estimate` and `truth` (CV_32F R×R,
+// mm, already limited to the band), over the texels of `mask` (CV_8U) whose central
+// differences are finite; texels mm_per_texel apart. A flat estimate scores the
+// truth's own mean slope angle; the truth itself scores 0. Differences from a
+// surface measure: the base surface is taken flat, which at a slope of a few degrees
+// changes the angles by well under 1 %.
+double BandNormalError(const cv::Mat& estimate, const cv::Mat& truth, const cv::Mat& mask, double mm_per_texel);
+
+// BandNormalError of the layers a capture adds to L~^t, against D* (means over frames).
+struct BandNormals {
+  double coarse_deg = 0;    // L~^t: nothing added
+  double meso_deg = 0;      // L~^t + D^HF
+  double detail_deg = 0;    // L~^t + D^t
+  double full_deg = 0;      // H^t = L~^t + D^t + D^HF
 };
 
 struct SurfaceError {
@@ -168,6 +196,11 @@ struct FrameCaptureEval {
   double true_visible_fraction = 0;  // of the face-chart vertices, ground truth
   bool has_surface = false;
   SurfaceError surface_coarse, surface_meso, surface_full;
+  // L~^t + D* + D^HF on the same measure (has_surface and D* known: has_surface_truth).
+  bool has_surface_truth = false;
+  SurfaceError surface_truth;
+  bool has_band_normals = false;  // D^t and D* known
+  BandNormals band_normals;
 };
 
 struct CaptureEvalSummary {
@@ -205,6 +238,15 @@ struct CaptureEvalSummary {
   // The smallest true_visible_fraction of the sequence (did an occluder cover the face?).
   double min_visible_fraction = 1.0;
   SurfaceError surface_coarse, surface_meso, surface_full;    // means over surface frames
+  int surface_truth_frames = 0;
+  SurfaceError surface_truth;  // L~^t + D* + D^HF, means over its frames
+  // Means over the active frames (those of the pooled displacement metrics).
+  int band_normal_frames = 0;
+  BandNormals band_normals;
+  // D^HF (the capture's maps/mesoscopic.exr, Sec. 5.3) against the actor's true
+  // mesoscopic layer (the dataset's maps/mesoscopic_displacement.exr), wrinkle
+  // regions, both in the band of the band normal error; texels 0 when either is absent.
+  MapComparison mesoscopic;
   // Rung A: a linear filter of the capture's own textures against D* (correlation[0])
   // and the wrinkle layer beyond the most neutral frame's (correlation[1]).
   AppearanceCeiling appearance;

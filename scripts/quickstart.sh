@@ -15,7 +15,7 @@
 #   6. captures it (paper Sec. 5: global tracker, flow refinement, texture, detail
 #      regression, mesoscopic detail, H^t) and evaluates the capture against the
 #      ground truth: global vs refined tracking error, the error and correlation of
-#      D^t, the normal error of H^t with and without detail, frames per second.
+#      D^t, the normal error of H^t with and without detail (and in the wrinkle band), frames per second.
 # Outputs go to ${CREASE_OUT:-out/quickstart}.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"

@@ -5,9 +5,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 #include <opencv2/core.hpp>
 
+#include "core/error.h"
 #include "core/file_util.h"
 #include "core/image_io.h"
 #include "core/ray_caster.h"
@@ -158,6 +160,37 @@ TEST(CaptureMetrics, SurfaceErrorInTheWrinkleRegionsCountsOnlyTheirVertices) {
   EXPECT_NEAR(e.wrinkle_distance_mm, 0.1 / std::cos(tilt), 1e-5);
   EXPECT_NEAR(e.distance_mm, (left * 0.1 / std::cos(tilt) + (n * n - left) * 0.1) / (n * n), 1e-5);
   EXPECT_EQ(MeasureSurface(h, caster, 5.0, cv::Mat()).wrinkle_samples, 0);
+}
+
+// The band normal error (issue 17): on ramps (planes) the angle between the normals
+// is exact, atan(s) − atan(s / 2) for slopes s and s / 2 along one direction; the
+// truth scores 0; only masked texels count; NaNs are skipped, never averaged in.
+TEST(CaptureMetrics, BandNormalErrorIsTheAngleBetweenTheHeightFieldsNormals) {
+  const int n = 32;
+  const double mm = 0.2, slope = 0.3;  // texel size, mm; the truth's slope (dz/dx)
+  cv::Mat truth(n, n, CV_32F), half(n, n, CV_32F), flat = cv::Mat::zeros(n, n, CV_32F);
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) {
+      truth.at<float>(y, x) = static_cast<float>(slope * mm * x);
+      half.at<float>(y, x) = static_cast<float>(0.5 * slope * mm * x);
+    }
+  const cv::Mat all = cv::Mat::ones(n, n, CV_8U);
+  const double deg = 180.0 / M_PI;
+  EXPECT_NEAR(BandNormalError(truth, truth, all, mm), 0.0, 1e-9);
+  EXPECT_NEAR(BandNormalError(flat, truth, all, mm), std::atan(slope) * deg, 1e-3);
+  EXPECT_NEAR(BandNormalError(half, truth, all, mm), (std::atan(slope) - std::atan(0.5 * slope)) * deg, 1e-3);
+  // A groove on the right half only: the left half (a flat truth there) scores 0.
+  cv::Mat groove = flat.clone();
+  for (int y = 0; y < n; ++y)
+    for (int x = n / 2; x < n; ++x) groove.at<float>(y, x) = static_cast<float>(slope * mm * (x - n / 2));
+  cv::Mat left = cv::Mat::zeros(n, n, CV_8U);
+  left(cv::Rect(0, 0, n / 2 - 1, n)).setTo(1);
+  EXPECT_NEAR(BandNormalError(flat, groove, left, mm), 0.0, 1e-9);
+  EXPECT_GT(BandNormalError(flat, groove, all, mm), 1.0);
+  cv::Mat holed = truth.clone();
+  holed.at<float>(5, 5) = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_NEAR(BandNormalError(flat, holed, all, mm), std::atan(slope) * deg, 1e-3);
+  EXPECT_THROW(BandNormalError(flat, truth, cv::Mat::ones(n, n, CV_32F), mm), Error);
 }
 
 // `crease eval`'s files: the summary's CSV, Markdown and JSON texts as they are, and
