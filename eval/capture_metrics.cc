@@ -1011,6 +1011,12 @@ void MeasureWrinkleOffset(const CaptureEvalContext& c, const cv::Mat& Db, const 
   }
 }
 
+// A frame with wrinkles: the truth's wrinkle-band RMS in the wrinkle regions reaches
+// active_reference_rms_mm (the frames the pooled displacement metrics count).
+bool IsActiveFrame(const CaptureEvalOptions& o, const FrameCaptureEval& e) {
+  return e.d_wrinkle_band.reference_rms_mm >= o.active_reference_rms_mm;
+}
+
 // Pools the frame's band (Db) into the displacement metrics of the frames where
 // it is active: against the truth (D, G, Gb) and against the dataset's wrinkle layer
 // (`layer`, static lines included: the truth of crease ≤ 0.3) when the truth is D*.
@@ -1023,7 +1029,7 @@ void PoolDisplacement(const CaptureEvalContext& c, const cv::Mat& D, const cv::M
       st->pooled_layer_band.Add(Db, Lb, c.wrinkle_mask);
     }
   }
-  if (e.d_wrinkle_band.reference_rms_mm >= c.options.active_reference_rms_mm) {
+  if (IsActiveFrame(c.options, e)) {
     ++st->active_frames;
     st->pooled_face.Add(D, G, c.coverage);
     st->pooled_wrinkle.Add(D, G, c.wrinkle_mask);
@@ -1159,7 +1165,7 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
   }
   MeasureWrinkleOffset(c, Db, Gb, e);
   PoolDisplacement(c, d.D, G, Db, Gb, layer, *e, st);
-  if (st->registration && e->d_wrinkle_band.reference_rms_mm >= c.options.active_reference_rms_mm) {
+  if (st->registration && IsActiveFrame(c.options, *e)) {
     PoolRegisteredTruth(c, t, arrays, d.D, G, Db, Gb, layer, st);
   }
   MeasureDisplacementJitter(c, st->previous, index, d.band_err, e);
@@ -1325,7 +1331,7 @@ void AverageDisplacementAndSurface(CaptureEvalSummary* s) {
 void AverageBandNormals(const CaptureEvalOptions& o, CaptureEvalSummary* s) {
   BandNormals& b = s->band_normals;
   for (const FrameCaptureEval& e : s->per_frame) {
-    if (!e.has_band_normals || e.d_wrinkle_band.reference_rms_mm < o.active_reference_rms_mm) continue;
+    if (!e.has_band_normals || !IsActiveFrame(o, e)) continue;
     ++s->band_normal_frames;
     b.coarse_deg += e.band_normals.coarse_deg;
     b.meso_deg += e.band_normals.meso_deg;
