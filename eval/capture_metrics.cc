@@ -33,6 +33,7 @@
 #include "pipeline/capture/flow_refinement.h"
 #include "pipeline/capture/frame_texture.h"
 #include "pipeline/capture/hifi_mesh.h"
+#include "pipeline/training/texture_extraction.h"
 #include "pipeline/training/wrinkle_map.h"
 #include "eval/rig_correspondence.h"
 #include "synth/actor.h"
@@ -114,6 +115,19 @@ cv::Mat ReadMap(const fs::path& path, int R, bool resample = false) {
           fmt::format("{}: the map is {}×{}, expected {}×{}", path.string(), m.cols, m.rows, R, R));
   return m;
 }
+
+}  // namespace
+
+cv::Mat AlbedoMesoscopicMap(const cv::Mat& albedo, const cv::Mat& seen, const MesoscopicOptions& options) {
+  Require(!albedo.empty() && albedo.rows == albedo.cols && (albedo.type() == CV_32FC3 || albedo.type() == CV_32FC1),
+          fmt::format("AlbedoMesoscopicMap: the albedo must be a square CV_32FC3 or CV_32FC1 map, got {}×{} type {}",
+                      albedo.cols, albedo.rows, albedo.type()));
+  Require(!seen.empty() && seen.rows == seen.cols,
+          fmt::format("AlbedoMesoscopicMap: the seen mask is {}×{}, expected a square map", seen.cols, seen.rows));
+  return MesoscopicMap(ResampleSquareMap(Luminance(albedo), seen.rows), seen, options);
+}
+
+namespace {
 
 json ComparisonJson(const MapComparison& c) {
   json j = MapComparisonJson(c);
@@ -665,6 +679,8 @@ struct CaptureEvalContext {
   cv::Mat meso;       // the capture's D^HF (zero when it wrote none)
   cv::Mat meso_band;  // NormalBand(D^HF)
   MapComparison meso_truth;  // D^HF against the true mesoscopic layer (texels 0: not known)
+  cv::Mat meso_albedo;       // AlbedoMesoscopicMap of the dataset's albedo (empty: none)
+  MapComparison meso_albedo_comparison;  // D^HF against it (texels 0: not known)
   // The truth of D^t when it is Sec. 4.1's detail; null: the wrinkle-layer maps.
   std::unique_ptr<DetailTruth> detail_truth;
   std::vector<int> frames;  // the capture's frames evaluated
@@ -756,6 +772,19 @@ void CaptureEvalContext::ReadMesoscopic() {
   if (corr.same_uv && fs::is_regular_file(true_path)) {
     const cv::Mat true_band = NormalBand(WrinkleBand(ReadMap(true_path, R, /*resample=*/true), band_mask));
     meso_truth = CompareMaps(meso_band, true_band, wrinkle_mask);
+  }
+  const fs::path albedo_path = dataset / "maps" / "albedo.exr";
+  if (corr.same_uv && fs::is_regular_file(meso_path) && fs::is_regular_file(albedo_path)) {
+    cv::Mat albedo = ReadImage(albedo_path, /*srgb=*/false);
+    if (albedo.channels() == 4) cv::cvtColor(albedo, albedo, cv::COLOR_RGBA2RGB);
+    if (albedo.depth() != CV_32F) albedo.convertTo(albedo, CV_32F);
+    const cv::Mat seen = meso != 0;  // D^HF is 0 where the first frame saw nothing
+    meso_albedo = AlbedoMesoscopicMap(albedo, seen, cap_options.mesoscopic);
+    meso_albedo_comparison = CompareMaps(meso, meso_albedo, wrinkle_mask);
+    if (!options.truth_maps_dir.empty()) {
+      fs::create_directories(options.truth_maps_dir);
+      WriteImage(fs::path(options.truth_maps_dir) / "mesoscopic_albedo.exr", meso_albedo);
+    }
   }
 }
 
@@ -1363,6 +1392,7 @@ CaptureEvalSummary ReduceSummary(const CaptureEvalContext& c, const FrameLoopSta
   AverageDisplacementAndSurface(&s);
   AverageBandNormals(c.options, &s);
   s.mesoscopic = c.meso_truth;
+  s.mesoscopic_albedo = c.meso_albedo_comparison;
   s.active_frames = st.active_frames;
   s.layer_active_frames = st.layer_active_frames;
   s.d_face = st.pooled_face.Result();
@@ -1489,6 +1519,10 @@ std::string CaptureEvalSummary::ToJson() const {
     j["surface"]["band"]["frames"] = band_normal_frames;
   }
   if (mesoscopic.texels > 0) j["surface"]["mesoscopic"] = ComparisonJson(mesoscopic);  // else absent
+  if (mesoscopic_albedo.texels > 0) {  // else absent
+    j["surface"]["mesoscopic_albedo"] = {{"texels", mesoscopic_albedo.texels},
+                                         {"correlation", mesoscopic_albedo.correlation}};
+  }
   j["speed"] = {{"fps", fps},
                 {"tracking_share", tracking_share},
                 {"detail_share", detail_share},
@@ -1702,6 +1736,11 @@ std::string CaptureEvalSummary::ToMarkdown() const {
     o << fmt::format("D^HF (Sec. 5.3) against the actor's true mesoscopic layer in the same band, wrinkle regions: "
                      "correlation {:.3f}, amplitude ratio {:.2f}\n\n",
                      mesoscopic.correlation, Amp(mesoscopic));
+  }
+  if (mesoscopic_albedo.texels > 0) {
+    o << fmt::format("D^HF against the D^HF of the true albedo alone (the skin's colour through the same DoG; Sec. "
+                     "5.3 reads dark as deep), wrinkle regions: correlation {:.3f}\n\n",
+                     mesoscopic_albedo.correlation);
   }
   if (fps > 0) {
     o << fmt::format("## Speed\n\n{:.1f} frames per second (file I/O excluded); tracking {:.0f} %, detail {:.0f} % "

@@ -42,6 +42,8 @@
 #include <string>
 #include <vector>
 
+#include <opencv2/core/mat.hpp>
+
 #include "core/camera.h"
 #include "core/ray_caster.h"
 #include "core/tri_mesh.h"
@@ -51,6 +53,16 @@
 #include "pipeline/training/detail_extraction.h"
 
 namespace crease {
+
+struct MesoscopicOptions;
+
+// What Sec. 5.3's DoG makes of the skin's colour alone: MesoscopicMap (`options`)
+// of the Rec. 709 luminance of a linear albedo map (CV_32FC3 RGB or CV_32FC1, any
+// square size, resampled to `seen`'s), over the texels `seen` (CV_8U, square,
+// non-zero = seen). Sec. 5.3 reads dark as deep: where the albedo varies at the
+// DoG's scale, the capture's D^HF follows this map rather than the relief.
+// Throws Error on a non-square albedo or a wrong type.
+cv::Mat AlbedoMesoscopicMap(const cv::Mat& albedo, const cv::Mat& seen, const MesoscopicOptions& options);
 
 class OptionVisitor;
 
@@ -77,7 +89,9 @@ struct CaptureEvalOptions {
   // of crease ≤ 0.3). The wrinkle layer alone is reported beside either.
   DetailTruthKind detail_truth = DetailTruthKind::kExtraction;
   // When set, the truth D^t is scored against is written here per frame
-  // (NNNNNN.exr, mm, CV_32F, the capture's map resolution), to look at beside D^t.
+  // (NNNNNN.exr, mm, CV_32F, the capture's map resolution), to look at beside D^t,
+  // with the D^HF of the true albedo (mesoscopic_albedo.exr, AlbedoMesoscopicMap)
+  // when the dataset has one.
   std::string truth_maps_dir;
   // The regions of the wrinkle metrics (rig region masks).
   std::vector<std::string> wrinkle_regions = {"forehead", "glabella", "left_eye", "right_eye", "left_cheek",
@@ -247,6 +261,10 @@ struct CaptureEvalSummary {
   // mesoscopic layer (the dataset's maps/mesoscopic_displacement.exr), wrinkle
   // regions, both in the band of the band normal error; texels 0 when either is absent.
   MapComparison mesoscopic;
+  // D^HF against AlbedoMesoscopicMap of the dataset's maps/albedo.exr over the same
+  // seen texels, wrinkle regions, unfiltered: how much of D^HF is the skin's colour.
+  // Texels 0 when either map is absent. Only its correlation is meaningful.
+  MapComparison mesoscopic_albedo;
   // Rung A: a linear filter of the capture's own textures against D* (correlation[0])
   // and the wrinkle layer beyond the most neutral frame's (correlation[1]).
   AppearanceCeiling appearance;

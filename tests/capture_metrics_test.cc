@@ -8,6 +8,7 @@
 #include <limits>
 
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/error.h"
 #include "core/file_util.h"
@@ -16,6 +17,7 @@
 #include "tests/test_util.h"
 #include "pipeline/capture/capture_io.h"
 #include "pipeline/capture/flow_refinement.h"
+#include "pipeline/capture/frame_texture.h"
 
 namespace crease {
 namespace {
@@ -191,6 +193,36 @@ TEST(CaptureMetrics, BandNormalErrorIsTheAngleBetweenTheHeightFieldsNormals) {
   holed.at<float>(5, 5) = std::numeric_limits<float>::quiet_NaN();
   EXPECT_NEAR(BandNormalError(flat, holed, all, mm), std::atan(slope) * deg, 1e-3);
   EXPECT_THROW(BandNormalError(flat, truth, cv::Mat::ones(n, n, CV_32F), mm), Error);
+}
+
+// D^HF of the skin's colour alone (Sec. 5.3's DoG on the albedo's luminance): a dark
+// freckle becomes a pit, a flat albedo no relief, and it is the capture's own
+// MesoscopicMap of that luminance (one copy of the numerics).
+TEST(CaptureMetrics, AlbedoMesoscopicMapTurnsADarkSpotIntoAPit) {
+  const int n = 32;
+  MesoscopicOptions o;
+  o.meso_reference_resolution = n;  // the 3×3 / 9×9 kernels at this map size
+  cv::Mat albedo(n, n, CV_32FC3, cv::Scalar(0.6f, 0.45f, 0.4f));
+  albedo(cv::Rect(15, 15, 2, 2)).setTo(cv::Scalar(0.2f, 0.1f, 0.1f));
+  const cv::Mat seen(n, n, CV_8U, cv::Scalar(255));
+  const cv::Mat d = AlbedoMesoscopicMap(albedo, seen, o);
+  ASSERT_EQ(d.size(), seen.size());
+  EXPECT_LT(d.at<float>(15, 15), -0.05f);           // dark reads as deep, γ = 5 mm per unit
+  EXPECT_NEAR(d.at<float>(2, 2), 0.0f, 1e-6f);      // flat colour far from it: no relief
+  cv::Mat lum(n, n, CV_32F, cv::Scalar(0.2126f * 0.6f + 0.7152f * 0.45f + 0.0722f * 0.4f));
+  lum(cv::Rect(15, 15, 2, 2)).setTo(0.2126f * 0.2f + 0.7152f * 0.1f + 0.0722f * 0.1f);
+  EXPECT_LT(cv::norm(d - MesoscopicMap(lum, seen, o), cv::NORM_INF), 1e-6);
+  // A finer albedo is resampled to the seen mask's size; unseen texels stay 0.
+  cv::Mat fine;
+  cv::resize(albedo, fine, cv::Size(2 * n, 2 * n), 0, 0, cv::INTER_NEAREST);
+  cv::Mat half_seen = seen.clone();
+  half_seen(cv::Rect(0, 0, n / 2, n)).setTo(0);
+  const cv::Mat df = AlbedoMesoscopicMap(fine, half_seen, o);
+  ASSERT_EQ(df.size(), seen.size());
+  EXPECT_EQ(df.at<float>(10, 3), 0.0f);
+  EXPECT_LT(df.at<float>(15, 16), -0.05f);
+  EXPECT_THROW(AlbedoMesoscopicMap(cv::Mat(n, n + 1, CV_32FC3, cv::Scalar::all(0.5)), seen, o), Error);
+  EXPECT_THROW(AlbedoMesoscopicMap(cv::Mat(n, n, CV_8UC3, cv::Scalar::all(100)), seen, o), Error);
 }
 
 // `crease eval`'s files: the summary's CSV, Markdown and JSON texts as they are, and

@@ -117,18 +117,22 @@ sys.exit(0 if fit < 0.5 * prior and fit < 1.5 else 1)
 PY
 # A perfect regressor (issue 17): the capture's D^t replaced by the truth D* that eval
 # writes scores 0 on the band normal error, and the surface measure's true-detail row is
-# the full row; L~^t alone keeps its error.
+# the full row; L~^t alone keeps its error. Its D^HF replaced by the D^HF of the true
+# albedo (also written by eval) is found to be that map.
 ok "eval truth maps" "$crease" eval --capture "$tmp/cap_fit" --dataset "$tmp/seq" --set surface_every=0 --set truth_maps_dir="$tmp/truth_maps"
 mkdir -p "$tmp/cap_oracle/displacement" && cp -r "$tmp/cap_fit/capture.json" "$tmp/cap_fit/rig.crig" "$tmp/cap_fit/frames" "$tmp/cap_fit/maps" "$tmp/cap_oracle/" \
-  && cp "$tmp/truth_maps/"*.exr "$tmp/cap_oracle/displacement/"
+  && cp "$tmp/truth_maps/"[0-9]*.exr "$tmp/cap_oracle/displacement/" \
+  && cp "$tmp/truth_maps/mesoscopic_albedo.exr" "$tmp/cap_oracle/maps/mesoscopic.exr"
 ok "eval perfect regressor" "$crease" eval --capture "$tmp/cap_oracle" --dataset "$tmp/seq" --set surface_every=1 --set surface_mesh_resolution=64 --set active_reference_rms_mm=0
 python3 - "$tmp/cap_oracle/eval.json" <<'PY' || { echo "FAIL: the perfect regressor's normal errors"; fails=$((fails+1)); }
 import json, sys
 s = json.load(open(sys.argv[1]))["surface"]
-b, full, true = s["band"], s["full"], s["true_detail"]
+b, full, true, albedo = s["band"], s["full"], s["true_detail"], s["mesoscopic_albedo"]
 print(f"band normal error: L~^t {b['coarse_deg']:.3f}, L~^t + D* {b['detail_deg']:.4f} deg; "
-      f"surface: H^t {full['normal_deg']:.3f}, true detail {true['normal_deg']:.3f} deg")
-sys.exit(0 if b["coarse_deg"] > 0.01 and b["detail_deg"] < 1e-4 and abs(full["normal_deg"] - true["normal_deg"]) < 1e-4 else 1)
+      f"surface: H^t {full['normal_deg']:.3f}, true detail {true['normal_deg']:.3f} deg; "
+      f"D^HF made of the true albedo: correlation {albedo['correlation']:.4f} with the albedo's D^HF")
+sys.exit(0 if b["coarse_deg"] > 0.01 and b["detail_deg"] < 1e-4 and abs(full["normal_deg"] - true["normal_deg"]) < 1e-4
+         and albedo["correlation"] > 0.999 else 1)
 PY
 # The truth registered through the image (eval/registered_truth.h): the texture of the
 # ground-truth fit slides less on the face than the prior control's, and keeps the truth.
