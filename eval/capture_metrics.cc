@@ -1739,7 +1739,8 @@ std::string CaptureEvalSummary::ToMarkdown() const {
   }
   if (mesoscopic_albedo.texels > 0) {
     o << fmt::format("D^HF against the D^HF of the true albedo alone (the skin's colour through the same DoG; Sec. "
-                     "5.3 reads dark as deep), wrinkle regions: correlation {:.3f}\n\n",
+                     "5.3 reads dark as deep), wrinkle regions: correlation {:.3f} (both maps in the truth's UV "
+                     "layout: a texture that slides more than the DoG's ~1 mm on the face hides the match)\n\n",
                      mesoscopic_albedo.correlation);
   }
   if (fps > 0) {

@@ -263,7 +263,10 @@ struct CaptureEvalSummary {
   MapComparison mesoscopic;
   // D^HF against AlbedoMesoscopicMap of the dataset's maps/albedo.exr over the same
   // seen texels, wrinkle regions, unfiltered: how much of D^HF is the skin's colour.
-  // Texels 0 when either map is absent. Only its correlation is meaningful.
+  // Texels 0 when either map is absent. Only its correlation is meaningful, and only
+  // while the capture's texture slides on the face by less than the DoG's scale
+  // (~1 mm): both maps are compared texel by texel in the truth's UV layout (on the
+  // quickstart's R3 capture, 3 mm of slide, it is −0.05; on an exact fit, 0.30).
   MapComparison mesoscopic_albedo;
   // Rung A: a linear filter of the capture's own textures against D* (correlation[0])
   // and the wrinkle layer beyond the most neutral frame's (correlation[1]).
