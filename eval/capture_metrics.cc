@@ -1597,6 +1597,42 @@ std::string CaptureEvalSummary::ToCsv() const {
   return o.str();
 }
 
+namespace {
+
+// The band normal error's table and the D^HF lines of eval.md (ToMarkdown).
+void WriteBandNormalsMarkdown(const CaptureEvalSummary& s, std::ostream& o) {
+  if (s.band_normal_frames > 0) {
+    const BandNormals& b = s.band_normals;
+    o << fmt::format("## Normal error in the wrinkle band, wrinkle regions, {} frames with wrinkles\n\n"
+                     "The layers' relief against D* between the band's edges (relief finer than the lower edge and "
+                     "broader than the wrinkle band left out), as height fields on the chart: the wrinkles' share of "
+                     "the normal error, which the surface measure above mixes with the pores, the static shape and the "
+                     "tracker's error (D* itself scores 0).\n\n",
+                     s.band_normal_frames);
+    o << "| layers | normal error, deg | against L~^t |\n|---|---|---|\n";
+    for (const auto& [name, deg] : {std::pair<const char*, double>{"L~^t (no detail)", b.coarse_deg},
+                                    {"L~^t + D^HF", b.meso_deg},
+                                    {"L~^t + D^t", b.detail_deg},
+                                    {"H^t = L~^t + D^t + D^HF", b.full_deg}}) {
+      o << fmt::format("| {} | {:.2f} | {:.2f} |\n", name, deg, b.coarse_deg > 0 ? deg / b.coarse_deg : 0.0);
+    }
+    o << "\n";
+  }
+  if (s.mesoscopic.texels > 0) {
+    o << fmt::format("D^HF (Sec. 5.3) against the actor's true mesoscopic layer in the same band, wrinkle regions: "
+                     "correlation {:.3f}, amplitude ratio {:.2f}\n\n",
+                     s.mesoscopic.correlation, Amp(s.mesoscopic));
+  }
+  if (s.mesoscopic_albedo.texels > 0) {
+    o << fmt::format("D^HF against the D^HF of the true albedo alone (the skin's colour through the same DoG; Sec. "
+                     "5.3 reads dark as deep), wrinkle regions: correlation {:.3f} (both maps in the truth's UV "
+                     "layout: a texture that slides more than the DoG's ~1 mm on the face hides the match)\n\n",
+                     s.mesoscopic_albedo.correlation);
+  }
+}
+
+}  // namespace
+
 std::string CaptureEvalSummary::ToMarkdown() const {
   std::ostringstream o;
   o << fmt::format("# Capture against ground truth\n\ncapture `{}`, dataset `{}`: {} frames, {} tracked\n\n", capture,
@@ -1715,34 +1751,7 @@ std::string CaptureEvalSummary::ToMarkdown() const {
     }
     o << "\n";
   }
-  if (band_normal_frames > 0) {
-    const BandNormals& b = band_normals;
-    o << fmt::format("## Normal error in the wrinkle band, wrinkle regions, {} frames with wrinkles\n\n"
-                     "The layers' relief against D* between the band's edges (relief finer than the lower edge and "
-                     "broader than the wrinkle band left out), as height fields on the chart: the wrinkles' share of "
-                     "the normal error, which the surface measure above mixes with the pores, the static shape and the "
-                     "tracker's error (D* itself scores 0).\n\n",
-                     band_normal_frames);
-    o << "| layers | normal error, deg | against L~^t |\n|---|---|---|\n";
-    for (const auto& [name, deg] : {std::pair<const char*, double>{"L~^t (no detail)", b.coarse_deg},
-                                    {"L~^t + D^HF", b.meso_deg},
-                                    {"L~^t + D^t", b.detail_deg},
-                                    {"H^t = L~^t + D^t + D^HF", b.full_deg}}) {
-      o << fmt::format("| {} | {:.2f} | {:.2f} |\n", name, deg, b.coarse_deg > 0 ? deg / b.coarse_deg : 0.0);
-    }
-    o << "\n";
-  }
-  if (mesoscopic.texels > 0) {
-    o << fmt::format("D^HF (Sec. 5.3) against the actor's true mesoscopic layer in the same band, wrinkle regions: "
-                     "correlation {:.3f}, amplitude ratio {:.2f}\n\n",
-                     mesoscopic.correlation, Amp(mesoscopic));
-  }
-  if (mesoscopic_albedo.texels > 0) {
-    o << fmt::format("D^HF against the D^HF of the true albedo alone (the skin's colour through the same DoG; Sec. "
-                     "5.3 reads dark as deep), wrinkle regions: correlation {:.3f} (both maps in the truth's UV "
-                     "layout: a texture that slides more than the DoG's ~1 mm on the face hides the match)\n\n",
-                     mesoscopic_albedo.correlation);
-  }
+  WriteBandNormalsMarkdown(*this, o);
   if (fps > 0) {
     o << fmt::format("## Speed\n\n{:.1f} frames per second (file I/O excluded); tracking {:.0f} %, detail {:.0f} % "
                      "(paper: 18 fps on a GTX 980, 58 % / 42 %)\n",
