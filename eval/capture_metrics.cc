@@ -679,8 +679,7 @@ struct CaptureEvalContext {
   cv::Mat meso;       // the capture's D^HF (zero when it wrote none)
   cv::Mat meso_band;  // NormalBand(D^HF)
   MapComparison meso_truth;  // D^HF against the true mesoscopic layer (texels 0: not known)
-  cv::Mat meso_albedo;       // AlbedoMesoscopicMap of the dataset's albedo (empty: none)
-  MapComparison meso_albedo_comparison;  // D^HF against it (texels 0: not known)
+  MapComparison meso_albedo_comparison;  // D^HF against AlbedoMesoscopicMap of the albedo (texels 0: not known)
   // The truth of D^t when it is Sec. 4.1's detail; null: the wrinkle-layer maps.
   std::unique_ptr<DetailTruth> detail_truth;
   std::vector<int> frames;  // the capture's frames evaluated
@@ -703,10 +702,10 @@ CaptureEvalContext::CaptureEvalContext(const fs::path& capture_dir, const fs::pa
   SetUpFaceChart();
   SetUpTruthMotion();
   SetUpSurfaceTruth();
+  if (!options.truth_maps_dir.empty()) fs::create_directories(options.truth_maps_dir);
   ReadMesoscopic();
   SelectFrames();
   SetUpDetailTruth();
-  if (!options.truth_maps_dir.empty()) fs::create_directories(options.truth_maps_dir);
 }
 
 void CaptureEvalContext::ReadInputs() {
@@ -775,14 +774,11 @@ void CaptureEvalContext::ReadMesoscopic() {
   }
   const fs::path albedo_path = dataset / "maps" / "albedo.exr";
   if (corr.same_uv && fs::is_regular_file(meso_path) && fs::is_regular_file(albedo_path)) {
-    cv::Mat albedo = ReadImage(albedo_path, /*srgb=*/false);
-    if (albedo.channels() == 4) cv::cvtColor(albedo, albedo, cv::COLOR_RGBA2RGB);
-    if (albedo.depth() != CV_32F) albedo.convertTo(albedo, CV_32F);
     const cv::Mat seen = meso != 0;  // D^HF is 0 where the first frame saw nothing
-    meso_albedo = AlbedoMesoscopicMap(albedo, seen, cap_options.mesoscopic);
+    const cv::Mat meso_albedo =
+        AlbedoMesoscopicMap(ReadRgbFrame(albedo_path, /*linear=*/true), seen, cap_options.mesoscopic);
     meso_albedo_comparison = CompareMaps(meso, meso_albedo, wrinkle_mask);
     if (!options.truth_maps_dir.empty()) {
-      fs::create_directories(options.truth_maps_dir);
       WriteImage(fs::path(options.truth_maps_dir) / "mesoscopic_albedo.exr", meso_albedo);
     }
   }
