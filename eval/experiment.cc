@@ -506,6 +506,33 @@ std::vector<ExperimentRun> ShardRuns(const std::vector<ExperimentRun>& runs, int
   return out;
 }
 
+namespace {
+
+// The crease version at which each kind of stage last changed what it writes
+// (StageVersions; the rule is in experiment.h). 0.4.8 and 0.4.9 changed the eval
+// alone (the band normal error, D^HF against the albedo's).
+constexpr std::pair<const char*, const char*> kStageCodeVersions[] = {
+    {"rig", "0.4.7"},      {"scans", "0.4.7"},    {"pairs", "0.4.7"},      {"model", "0.4.7"},
+    {"loao", "0.4.7"},     {"tracker", "0.4.7"},  {"actor", "0.4.7"},      {"sequence", "0.4.7"},
+    {"truth-maps", "0.4.7"}, {"capture", "0.4.7"}, {"eval", "0.4.9"},
+};
+
+}  // namespace
+
+const std::string& StageVersions::Of(const std::string& kind) const {
+  const auto it = by_kind.find(kind);
+  if (it != by_kind.end()) return it->second;
+  Require(!all.empty(), fmt::format("no cache-key version for stage kind '{}' (kStageCodeVersions, "
+                                    "eval/experiment.cc)", kind));
+  return all;
+}
+
+StageVersions CurrentStageVersions() {
+  StageVersions v;
+  for (const auto& [kind, version] : kStageCodeVersions) v.by_kind[kind] = version;
+  return v;
+}
+
 std::string ExperimentKey(const json& j) {
   const std::string s = j.dump();
   uint64_t h = 1469598103934665603ull;  // FNV-1a, 64 bit
@@ -526,15 +553,15 @@ struct RunPlan {
   ExperimentDataset d;
   int64_t seed_offset = 0;  // added to the dataset's seeds: 1000 per seed of the run after the first
   fs::path cache;
-  std::string program_version;
+  const StageVersions& versions;
   std::vector<ExperimentStage> stages;
 
-  // Adds a stage whose key hashes `inputs` with its kind, the program version, the
+  // Adds a stage whose key hashes `inputs` with its kind, the kind's version, the
   // cache salt and the keys it `depends` on; `argv` gets the stage's folder.
   const ExperimentStage& Add(const std::string& kind, json inputs, std::vector<std::string> depends,
                              const ArgvOfDir& argv) {
     inputs["stage"] = kind;
-    inputs["crease"] = program_version;
+    inputs["crease"] = versions.Of(kind);
     inputs["salt"] = d.cache_salt;
     inputs["depends"] = depends;
     ExperimentStage s;
@@ -773,9 +800,8 @@ void PlanCaptureStages(RunPlan& p, const ExperimentStage& model, const Experimen
 }  // namespace
 
 std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const fs::path& cache,
-                                           const std::string& program_version) {
-  RunPlan p{run.resolved, DatasetOf(run.resolved), 1000 * static_cast<int64_t>(run.seed - 1), cache, program_version,
-            {}};
+                                           const StageVersions& versions) {
+  RunPlan p{run.resolved, DatasetOf(run.resolved), 1000 * static_cast<int64_t>(run.seed - 1), cache, versions, {}};
   const ExperimentStage rig = PlanRigStage(p);
   const ExperimentStage scans = PlanScanStage(p, rig);
   const ExperimentStage model = PlanTrainingStages(p, rig, scans);
@@ -1007,7 +1033,7 @@ StagePlan PlanStages(const std::vector<ExperimentJob>& jobs) {
     p.runs = ShardRuns(all_runs, job.options.shard, job.options.num_shards);
     std::set<std::string> own;
     for (const auto& r : p.runs) {
-      p.run_stages.push_back(PlanRunStages(r, first.cache, job.options.program_version));
+      p.run_stages.push_back(PlanRunStages(r, first.cache, job.options.stage_versions));
       for (const auto& s : p.run_stages.back()) {
         own.insert(s.key);
         if (plan.index.count(s.key)) continue;

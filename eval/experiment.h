@@ -183,10 +183,32 @@ std::string ExperimentCommandLine(const std::vector<std::string>& argv);
 // A stable 64-bit FNV-1a hash of `j.dump()` (keys are sorted), as 16 hex digits.
 std::string ExperimentKey(const nlohmann::json& j);
 
+// The version each kind of stage puts into its cache key. A kind's version is the
+// crease version at which the code its command runs last changed what the stage
+// writes, so a release that changes only the eval re-runs only the eval stages
+// against a cache of earlier captures, sequences and models (the keys of the stages
+// a stage reads are in its key too, so a new capture version re-runs its evals).
+struct StageVersions {
+  std::string all;                             // the version of every kind not in by_kind
+  std::map<std::string, std::string> by_kind;  // kind → version
+  // Every kind at `version` (tests; what every key held before this table).
+  static StageVersions Uniform(const std::string& version) { return {version, {}}; }
+  // The kind's version; a kind without one (not in by_kind, `all` empty) throws Error.
+  const std::string& Of(const std::string& kind) const;
+};
+
+// This build's table (kStageCodeVersions in experiment.cc), one entry per kind.
+// Rule for whoever bumps crease's VERSION: set the entry of every kind whose command
+// now writes different bytes; a change under core/ sets them all. Stage kinds and the
+// code their commands run: rig (synth rig), scans (synth scans), pairs and model
+// (train), loao (model eval-pairs), tracker (train-tracker), actor, sequence (synth),
+// truth-maps, capture (pipeline/capture), eval (eval/capture_metrics).
+StageVersions CurrentStageVersions();
+
 // The stages of a run (deduplicated by key across runs by the caller), in order.
-// `program_version` enters every key.
+// Each key holds `versions.Of(kind)`.
 std::vector<ExperimentStage> PlanRunStages(const ExperimentRun& run, const std::filesystem::path& cache,
-                                           const std::string& program_version);
+                                           const StageVersions& versions);
 
 // Runs `argv` (crease arguments) with stdout and stderr to `log`; returns the exit
 // status (0 = success). The default spawns the crease program `program`. The stage
@@ -215,7 +237,8 @@ struct ExperimentRunnerOptions {
   int seeds = 0;                   // > 0 overrides the config's
   int jobs = 1;                    // stages run at once
   int shard = 0, num_shards = 1;   // run only this slice of the runs
-  std::string program_version;     // enters every cache key (crease's version number)
+  std::string program_version;     // crease's version number (recorded; see build_description)
+  StageVersions stage_versions;    // the cache keys' versions (CurrentStageVersions in the program)
   std::string build_description;   // recorded only (crease_version: version + git, fixed at build time)
   std::string command;             // the command line, recorded for the report
   std::function<void(const std::string&)> log;  // progress lines (may be empty)

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <mutex>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include <signal.h>
@@ -253,34 +254,34 @@ TEST(Experiment, CacheKeysChangeExactlyWithTheirInputs) {
   const auto runs = ExpandRuns(c);
   const fs::path cache = "/tmp/cache";
   // Same inputs → same keys (and the plan is deterministic).
-  EXPECT_EQ(KeysByKind(PlanRunStages(runs[0], cache, "1")), KeysByKind(PlanRunStages(runs[0], cache, "1")));
+  EXPECT_EQ(KeysByKind(PlanRunStages(runs[0], cache, StageVersions::Uniform("1"))), KeysByKind(PlanRunStages(runs[0], cache, StageVersions::Uniform("1"))));
   // A capture option (run 4: wrinkle_frames=5 at base num_ferns) vs the base of run
   // 0's sweep key: a different training (num_ferns 80 vs 1280) changes the model,
   // capture and eval, never the rig, scans, tracker, actors or sequences.
-  const auto a = KeysByKind(PlanRunStages(runs[0], cache, "1"));
-  const auto b = KeysByKind(PlanRunStages(runs[4], cache, "1"));
+  const auto a = KeysByKind(PlanRunStages(runs[0], cache, StageVersions::Uniform("1")));
+  const auto b = KeysByKind(PlanRunStages(runs[4], cache, StageVersions::Uniform("1")));
   for (const char* same : {"rig", "scans", "pairs", "tracker", "actor", "sequence"})
     EXPECT_EQ(a.at(same), b.at(same)) << same;
   for (const char* diff : {"model", "capture", "eval"}) EXPECT_NE(a.at(diff), b.at(diff)) << diff;
   // Two capture settings share everything up to the capture.
-  const auto c5 = KeysByKind(PlanRunStages(runs[4], cache, "1"));
-  const auto c10 = KeysByKind(PlanRunStages(runs[6], cache, "1"));
+  const auto c5 = KeysByKind(PlanRunStages(runs[4], cache, StageVersions::Uniform("1")));
+  const auto c10 = KeysByKind(PlanRunStages(runs[6], cache, StageVersions::Uniform("1")));
   for (const char* same : {"rig", "scans", "model", "tracker", "actor", "sequence"})
     EXPECT_EQ(c5.at(same), c10.at(same)) << same;
   EXPECT_NE(c5.at("capture"), c10.at("capture"));
   // Another seed: other actors, so other scans, model, actors, sequences; same rig and tracker.
-  const auto s2 = KeysByKind(PlanRunStages(runs[1], cache, "1"));
+  const auto s2 = KeysByKind(PlanRunStages(runs[1], cache, StageVersions::Uniform("1")));
   EXPECT_EQ(a.at("rig"), s2.at("rig"));
   EXPECT_EQ(a.at("tracker"), s2.at("tracker"));
   EXPECT_NE(a.at("scans"), s2.at("scans"));
   EXPECT_NE(a.at("sequence"), s2.at("sequence"));
   // crease's version enters every key.
-  const auto v2 = KeysByKind(PlanRunStages(runs[0], cache, "2"));
+  const auto v2 = KeysByKind(PlanRunStages(runs[0], cache, StageVersions::Uniform("2")));
   for (const auto& [kind, key] : a) EXPECT_NE(key, v2.at(kind)) << kind;
   // The studio's options reach the sequence, not the training scans.
   ExperimentConfig lit = c;
   lit.sections["studio"] = json{{"light", "raking-above"}};
-  const auto l = KeysByKind(PlanRunStages(ExpandRuns(lit)[0], cache, "1"));
+  const auto l = KeysByKind(PlanRunStages(ExpandRuns(lit)[0], cache, StageVersions::Uniform("1")));
   EXPECT_EQ(a.at("model"), l.at("model"));
   EXPECT_NE(a.at("sequence"), l.at("sequence"));
   // Two test actors per run: two actors, sequences, captures and evals.
@@ -292,10 +293,10 @@ TEST(Experiment, CacheKeysChangeExactlyWithTheirInputs) {
   const json capture_defaults = json::parse(OptionsToJson(CaptureOptions()));
   explicit_default.sections["training"]["ferns.depth"] = training_defaults.at("ferns.depth");
   explicit_default.sections["capture"]["detail.wrinkle_frames"] = capture_defaults.at("detail.wrinkle_frames");
-  const auto e = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, "1"));
+  const auto e = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, StageVersions::Uniform("1")));
   EXPECT_EQ(a, e);
   explicit_default.sections["training"]["ferns.depth"] = training_defaults.at("ferns.depth").get<int>() + 1;
-  const auto e1 = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, "1"));
+  const auto e1 = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, StageVersions::Uniform("1")));
   EXPECT_NE(a.at("model"), e1.at("model"));
 }
 
@@ -323,6 +324,46 @@ const ExperimentStage* FindStage(const std::vector<ExperimentStage>& stages, con
   return nullptr;
 }
 
+// "0.4.10" → {0, 4, 10}.
+std::vector<int> VersionNumbers(const std::string& v) {
+  std::vector<int> n;
+  std::stringstream ss(v);
+  for (std::string part; std::getline(ss, part, '.');) n.push_back(std::stoi(part));
+  return n;
+}
+
+TEST(Experiment, EachStageKindKeysItsOwnCodeVersion) {
+  const auto toy = ExpandRuns(ParseExperimentConfig(kConfig, "toy.yaml"));
+  const auto ladder = ExpandRuns(ParseExperimentConfig(kLadder, "ladder.yaml"));
+  const fs::path cache = "/tmp/cache";
+  // A new eval version re-keys the evals alone; a new capture version the captures
+  // and, through their keys, the evals that read them.
+  StageVersions v = StageVersions::Uniform("1");
+  const auto base = KeysByKind(PlanRunStages(toy[0], cache, v));
+  v.by_kind["eval"] = "2";
+  const auto new_eval = KeysByKind(PlanRunStages(toy[0], cache, v));
+  v.by_kind["capture"] = "2";
+  const auto new_capture = KeysByKind(PlanRunStages(toy[0], cache, v));
+  for (const auto& [kind, key] : base) {
+    EXPECT_EQ(key == new_eval.at(kind), kind != "eval") << kind;
+    EXPECT_EQ(key == new_capture.at(kind), kind != "eval" && kind != "capture") << kind;
+  }
+  // This build's table names every kind a plan can hold (the ladder's loao and
+  // truth-maps too), none after crease's own version; a kind it lacks is an error.
+  const StageVersions current = CurrentStageVersions();
+  std::set<std::string> kinds;
+  for (const auto* runs : {&toy, &ladder})
+    for (const auto& r : *runs)
+      for (const auto& s : PlanRunStages(r, cache, current)) kinds.insert(s.kind);
+  for (const char* kind : {"rig", "scans", "pairs", "model", "loao", "tracker", "actor", "sequence", "truth-maps",
+                           "capture", "eval"})
+    EXPECT_TRUE(kinds.count(kind)) << kind;
+  for (const auto& [kind, version] : current.by_kind)
+    EXPECT_LE(VersionNumbers(version), VersionNumbers(CREASE_VERSION)) << kind;
+  EXPECT_EQ(current.by_kind.size(), kinds.size());
+  EXPECT_THROW(current.Of("no-such-kind"), Error);
+}
+
 TEST(Experiment, VariantsSweepBundlesOfSettingsAndTheLadderPlansItsRungs) {
   const auto runs = ExpandRuns(ParseExperimentConfig(kLadder, "ladder.yaml"));
   ASSERT_EQ(runs.size(), 6u);
@@ -333,12 +374,12 @@ TEST(Experiment, VariantsSweepBundlesOfSettingsAndTheLadderPlansItsRungs) {
   EXPECT_EQ(runs[4].resolved.sections.at("dataset").at("scan_size"), "1280x720");
   const fs::path cache = "/tmp/cache";
   // R0b: the pairs with the wrinkle layer as targets, the loao stage, no capture.
-  const auto r0 = PlanRunStages(runs[0], cache, "1");
+  const auto r0 = PlanRunStages(runs[0], cache, StageVersions::Uniform("1"));
   ASSERT_NE(FindStage(r0, "loao"), nullptr);
   EXPECT_EQ(FindStage(r0, "loao")->depends, std::vector<std::string>{FindStage(r0, "pairs")->key});
   EXPECT_EQ(FindStage(r0, "capture"), nullptr);
   // R1: the truth maps of the wrinkle frames feed the capture's wrinkle map.
-  const auto r1 = PlanRunStages(runs[1], cache, "1");
+  const auto r1 = PlanRunStages(runs[1], cache, StageVersions::Uniform("1"));
   const ExperimentStage* maps = FindStage(r1, "truth-maps");
   ASSERT_NE(maps, nullptr);
   const ExperimentStage* capture = FindStage(r1, "capture");
@@ -348,13 +389,13 @@ TEST(Experiment, VariantsSweepBundlesOfSettingsAndTheLadderPlansItsRungs) {
   EXPECT_NE(std::find(capture->argv.begin(), capture->argv.end(), wrinkle_maps), capture->argv.end());
   EXPECT_NE(std::find(capture->argv.begin(), capture->argv.end(), "--ground-truth-surface"), capture->argv.end());
   // R3: the tracker, no truth maps; its loao stage is R1's (same pairs, same options).
-  const auto r3 = PlanRunStages(runs[2], cache, "1");
+  const auto r3 = PlanRunStages(runs[2], cache, StageVersions::Uniform("1"));
   EXPECT_EQ(FindStage(r3, "truth-maps"), nullptr);
   EXPECT_NE(FindStage(r3, "tracker"), nullptr);
   EXPECT_EQ(FindStage(r3, "loao")->key, FindStage(r1, "loao")->key);
   EXPECT_NE(FindStage(r0, "loao")->key, FindStage(r1, "loao")->key);
   // The big size renders the scans at its size too: other scans than the small one's.
-  const auto big = PlanRunStages(runs[4], cache, "1");
+  const auto big = PlanRunStages(runs[4], cache, StageVersions::Uniform("1"));
   EXPECT_NE(FindStage(big, "scans")->key, FindStage(r1, "scans")->key);
   const auto& scan_argv = FindStage(big, "scans")->argv;
   EXPECT_NE(std::find(scan_argv.begin(), scan_argv.end(), "1280x720"), scan_argv.end());
@@ -365,6 +406,7 @@ TEST(Experiment, VariantsSweepBundlesOfSettingsAndTheLadderPlansItsRungs) {
   o.out = root / "out";
   o.cache = root / "cache";
   o.program_version = "1";
+  o.stage_versions = StageVersions::Uniform("1");
   const ExperimentSummary sum = RunExperiment(ParseExperimentConfig(kLadder, "ladder.yaml"), o, FakeExecute);
   EXPECT_EQ(sum.runs_ok, 6);
   const json run = ReadJsonFile(o.out / "runs" / "size=small_rung=R1_seed1.json");
@@ -387,8 +429,8 @@ TEST(Experiment, NestedAndDottedSectionsAreTheSameConfig) {
   EXPECT_EQ(nested.sections.at("capture"), dotted.sections.at("capture"));
   EXPECT_EQ(dotted.sections.at("capture").at("refinement.lk_window"), 15);
   const fs::path cache = "/tmp/cache";
-  EXPECT_EQ(KeysByKind(PlanRunStages(ExpandRuns(nested)[0], cache, "1")),
-            KeysByKind(PlanRunStages(ExpandRuns(dotted)[0], cache, "1")));
+  EXPECT_EQ(KeysByKind(PlanRunStages(ExpandRuns(nested)[0], cache, StageVersions::Uniform("1"))),
+            KeysByKind(PlanRunStages(ExpandRuns(dotted)[0], cache, StageVersions::Uniform("1"))));
 }
 
 // Every key of the nested option structs is registered once (issue 18: the landmark
@@ -416,6 +458,7 @@ TEST(Experiment, ARunResumedAfterAFailureEqualsAnUninterruptedOne) {
   const fs::path root = TempDir("resume");
   ExperimentRunnerOptions o;
   o.program_version = "test";
+  o.stage_versions = StageVersions::Uniform("test");
   o.jobs = 2;
 
   o.out = root / "whole";
@@ -490,6 +533,7 @@ TEST(Experiment, ExperimentsRunTogetherShareTheirStages) {
   const fs::path root = TempDir("together");
   ExperimentRunnerOptions o;
   o.program_version = "test";
+  o.stage_versions = StageVersions::Uniform("test");
   o.cache = root / "cache";
   o.jobs = 2;
   std::vector<ExperimentJob> jobs = {{a, o}, {b, o}};
@@ -523,6 +567,7 @@ TEST(Experiment, AnExclusiveCaptureRunsAlone) {
   const fs::path root = TempDir("exclusive");
   ExperimentRunnerOptions o;
   o.program_version = "test";
+  o.stage_versions = StageVersions::Uniform("test");
   o.cache = root / "cache";
   o.out = root / "out";
   o.jobs = 2;
@@ -561,6 +606,7 @@ TEST(Experiment, TwoRunnersOnOneCacheMakeEachStageOnce) {
   const fs::path root = TempDir("two_runners");
   ExperimentRunnerOptions o;
   o.program_version = "test";
+  o.stage_versions = StageVersions::Uniform("test");
   o.cache = root / "cache";
   o.jobs = 2;
   std::map<std::string, int> made;  // command → times its executor ran

@@ -40,7 +40,7 @@ slurm:
 std::vector<ExperimentStage> UniqueStages(const ExperimentConfig& c, const fs::path& cache) {
   std::vector<ExperimentStage> unique;
   for (const auto& r : ExpandRuns(c))
-    for (const auto& s : PlanRunStages(r, cache, "test"))
+    for (const auto& s : PlanRunStages(r, cache, StageVersions::Uniform("test")))
       if (std::none_of(unique.begin(), unique.end(), [&](const auto& u) { return u.key == s.key; })) unique.push_back(s);
   return unique;
 }
@@ -227,6 +227,7 @@ FakeCluster MakeFakeCluster(const std::string& name) {
   fs::create_directories(f.root / "bin");
   f.slurm = FakeSlurm(f.root / "bin");
   f.options.program_version = "test";
+  f.options.stage_versions = StageVersions::Uniform("test");
   f.options.cache = f.root / "cache";
   f.options.out = f.root / "out";
   f.options.record_stages = true;

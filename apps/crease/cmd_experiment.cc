@@ -73,6 +73,7 @@ ExperimentRunnerOptions RunnerOptions(const RunArgs& a) {
   o.out = fs::absolute(a.out.empty() ? fs::path("out/experiments") : fs::path(a.out));
   o.cache = fs::absolute(a.cache.empty() ? o.out / "cache" : fs::path(a.cache));
   o.program_version = CREASE_VERSION;
+  o.stage_versions = CurrentStageVersions();
   o.build_description = CREASE_BUILD_DESCRIPTION;  // fixed when this program was built
   o.log = [](const std::string& line) {
     std::printf("%s\n", line.c_str());
@@ -89,7 +90,7 @@ void PrintDryRun(const std::vector<ExperimentConfig>& parsed, const RunArgs& a, 
     std::printf("%s: %zu runs\n", c.name.c_str(), runs.size());
     for (const auto& r : runs) {
       std::printf("  %s\n", r.id.c_str());
-      for (const auto& s : PlanRunStages(r, o.cache, o.program_version)) {
+      for (const auto& s : PlanRunStages(r, o.cache, o.stage_versions)) {
         std::printf("    [%s %s] %s\n", s.kind.c_str(), s.key.c_str(), ExperimentCommandLine(s.argv).c_str());
       }
     }
