@@ -246,6 +246,9 @@ ok "experiment run (tiny, real stages)" "$crease" experiment run "$data/../tests
   { echo "FAIL: experiment wrote no results"; fails=$((fails+1)); }
 ok "experiment rerun (all cached)" "$crease" experiment run "$data/../tests/data/experiment_tiny.yaml" -o "$tmp/exp"
 grep -q "10 stages (10 cached, 0 run, 0 failed)" "$tmp/out" || { echo "FAIL: rerun did not reuse the cache"; cat "$tmp/out"; fails=$((fails+1)); }
+ok "experiment dry run (all cached)" "$crease" experiment run "$data/../tests/data/experiment_tiny.yaml" -o "$tmp/exp" --dry-run
+grep -q "tiny: 10 stages, 10 cached; to run: none" "$tmp/out" && grep -q "^    \[eval [0-9a-f]* cached\] crease eval" "$tmp/out" ||
+  { echo "FAIL: the dry run does not say what is cached"; cat "$tmp/out"; fails=$((fails+1)); }
 ok "report" "$crease" report "$tmp/exp/tiny"
 # The detail ladder's own stages (issue 17): leave one actor out (R0) and the truth
 # maps that place R1's patches.

@@ -6,9 +6,14 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <map>
 #include <memory>
+#include <set>
+#include <string>
+#include <vector>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "apps/crease/commands.h"
 #include "crease_build_version.h"  // generated: CREASE_BUILD_DESCRIPTION
@@ -88,12 +93,23 @@ void PrintDryRun(const std::vector<ExperimentConfig>& parsed, const RunArgs& a, 
     if (a.seeds > 0) c.seeds = a.seeds;
     const auto runs = ShardRuns(ExpandRuns(c), o.shard, o.num_shards);
     std::printf("%s: %zu runs\n", c.name.c_str(), runs.size());
+    std::set<std::string> unique, cached;
+    std::map<std::string, int> to_run;  // kind → stages not in the cache
     for (const auto& r : runs) {
       std::printf("  %s\n", r.id.c_str());
       for (const auto& s : PlanRunStages(r, o.cache, o.stage_versions)) {
-        std::printf("    [%s %s] %s\n", s.kind.c_str(), s.key.c_str(), ExperimentCommandLine(s.argv).c_str());
+        const bool done = StageIsComplete(s);
+        std::printf("    [%s %s%s] %s\n", s.kind.c_str(), s.key.c_str(), done ? " cached" : "",
+                    ExperimentCommandLine(s.argv).c_str());
+        if (!unique.insert(s.key).second) continue;
+        if (done) cached.insert(s.key);
+        else ++to_run[s.kind];
       }
     }
+    std::vector<std::string> parts;
+    for (const auto& [kind, n] : to_run) parts.push_back(fmt::format("{} {}", n, kind));
+    std::printf("%s: %zu stages, %zu cached; to run: %s\n", c.name.c_str(), unique.size(), cached.size(),
+                parts.empty() ? "none" : fmt::format("{}", fmt::join(parts, ", ")).c_str());
   }
 }
 
@@ -181,7 +197,9 @@ void AddRunCommand(CLI::App* exp) {
       ->capture_default_str();
   cmd->add_option("--slurm-poll", a->slurm_poll, "Seconds between the runner's squeue polls (slurm executor)")
       ->capture_default_str();
-  cmd->add_flag("--dry-run", a->dry_run, "Print the runs and the commands of their stages, run nothing");
+  cmd->add_flag("--dry-run", a->dry_run,
+                "Print the runs and the commands of their stages (marking those in the cache) and, per "
+                "experiment, what is left to run; run nothing");
   cmd->callback([a] { RunExperimentCommand(*a); });
 }
 
