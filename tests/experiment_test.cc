@@ -253,24 +253,25 @@ TEST(Experiment, CacheKeysChangeExactlyWithTheirInputs) {
   const ExperimentConfig c = ParseExperimentConfig(kConfig, "toy.yaml");
   const auto runs = ExpandRuns(c);
   const fs::path cache = "/tmp/cache";
+  const StageVersions v1 = StageVersions::Uniform("1");
   // Same inputs → same keys (and the plan is deterministic).
-  EXPECT_EQ(KeysByKind(PlanRunStages(runs[0], cache, StageVersions::Uniform("1"))), KeysByKind(PlanRunStages(runs[0], cache, StageVersions::Uniform("1"))));
+  EXPECT_EQ(KeysByKind(PlanRunStages(runs[0], cache, v1)), KeysByKind(PlanRunStages(runs[0], cache, v1)));
   // A capture option (run 4: wrinkle_frames=5 at base num_ferns) vs the base of run
   // 0's sweep key: a different training (num_ferns 80 vs 1280) changes the model,
   // capture and eval, never the rig, scans, tracker, actors or sequences.
-  const auto a = KeysByKind(PlanRunStages(runs[0], cache, StageVersions::Uniform("1")));
-  const auto b = KeysByKind(PlanRunStages(runs[4], cache, StageVersions::Uniform("1")));
+  const auto a = KeysByKind(PlanRunStages(runs[0], cache, v1));
+  const auto b = KeysByKind(PlanRunStages(runs[4], cache, v1));
   for (const char* same : {"rig", "scans", "pairs", "tracker", "actor", "sequence"})
     EXPECT_EQ(a.at(same), b.at(same)) << same;
   for (const char* diff : {"model", "capture", "eval"}) EXPECT_NE(a.at(diff), b.at(diff)) << diff;
   // Two capture settings share everything up to the capture.
-  const auto c5 = KeysByKind(PlanRunStages(runs[4], cache, StageVersions::Uniform("1")));
-  const auto c10 = KeysByKind(PlanRunStages(runs[6], cache, StageVersions::Uniform("1")));
+  const auto c5 = KeysByKind(PlanRunStages(runs[4], cache, v1));
+  const auto c10 = KeysByKind(PlanRunStages(runs[6], cache, v1));
   for (const char* same : {"rig", "scans", "model", "tracker", "actor", "sequence"})
     EXPECT_EQ(c5.at(same), c10.at(same)) << same;
   EXPECT_NE(c5.at("capture"), c10.at("capture"));
   // Another seed: other actors, so other scans, model, actors, sequences; same rig and tracker.
-  const auto s2 = KeysByKind(PlanRunStages(runs[1], cache, StageVersions::Uniform("1")));
+  const auto s2 = KeysByKind(PlanRunStages(runs[1], cache, v1));
   EXPECT_EQ(a.at("rig"), s2.at("rig"));
   EXPECT_EQ(a.at("tracker"), s2.at("tracker"));
   EXPECT_NE(a.at("scans"), s2.at("scans"));
@@ -281,7 +282,7 @@ TEST(Experiment, CacheKeysChangeExactlyWithTheirInputs) {
   // The studio's options reach the sequence, not the training scans.
   ExperimentConfig lit = c;
   lit.sections["studio"] = json{{"light", "raking-above"}};
-  const auto l = KeysByKind(PlanRunStages(ExpandRuns(lit)[0], cache, StageVersions::Uniform("1")));
+  const auto l = KeysByKind(PlanRunStages(ExpandRuns(lit)[0], cache, v1));
   EXPECT_EQ(a.at("model"), l.at("model"));
   EXPECT_NE(a.at("sequence"), l.at("sequence"));
   // Two test actors per run: two actors, sequences, captures and evals.
@@ -293,10 +294,10 @@ TEST(Experiment, CacheKeysChangeExactlyWithTheirInputs) {
   const json capture_defaults = json::parse(OptionsToJson(CaptureOptions()));
   explicit_default.sections["training"]["ferns.depth"] = training_defaults.at("ferns.depth");
   explicit_default.sections["capture"]["detail.wrinkle_frames"] = capture_defaults.at("detail.wrinkle_frames");
-  const auto e = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, StageVersions::Uniform("1")));
+  const auto e = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, v1));
   EXPECT_EQ(a, e);
   explicit_default.sections["training"]["ferns.depth"] = training_defaults.at("ferns.depth").get<int>() + 1;
-  const auto e1 = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, StageVersions::Uniform("1")));
+  const auto e1 = KeysByKind(PlanRunStages(ExpandRuns(explicit_default)[0], cache, v1));
   EXPECT_NE(a.at("model"), e1.at("model"));
 }
 
@@ -373,13 +374,14 @@ TEST(Experiment, VariantsSweepBundlesOfSettingsAndTheLadderPlansItsRungs) {
   EXPECT_EQ(runs[4].resolved.sections.at("dataset").at("patch_sites"), "truth");
   EXPECT_EQ(runs[4].resolved.sections.at("dataset").at("scan_size"), "1280x720");
   const fs::path cache = "/tmp/cache";
+  const StageVersions v1 = StageVersions::Uniform("1");
   // R0b: the pairs with the wrinkle layer as targets, the loao stage, no capture.
-  const auto r0 = PlanRunStages(runs[0], cache, StageVersions::Uniform("1"));
+  const auto r0 = PlanRunStages(runs[0], cache, v1);
   ASSERT_NE(FindStage(r0, "loao"), nullptr);
   EXPECT_EQ(FindStage(r0, "loao")->depends, std::vector<std::string>{FindStage(r0, "pairs")->key});
   EXPECT_EQ(FindStage(r0, "capture"), nullptr);
   // R1: the truth maps of the wrinkle frames feed the capture's wrinkle map.
-  const auto r1 = PlanRunStages(runs[1], cache, StageVersions::Uniform("1"));
+  const auto r1 = PlanRunStages(runs[1], cache, v1);
   const ExperimentStage* maps = FindStage(r1, "truth-maps");
   ASSERT_NE(maps, nullptr);
   const ExperimentStage* capture = FindStage(r1, "capture");
@@ -389,13 +391,13 @@ TEST(Experiment, VariantsSweepBundlesOfSettingsAndTheLadderPlansItsRungs) {
   EXPECT_NE(std::find(capture->argv.begin(), capture->argv.end(), wrinkle_maps), capture->argv.end());
   EXPECT_NE(std::find(capture->argv.begin(), capture->argv.end(), "--ground-truth-surface"), capture->argv.end());
   // R3: the tracker, no truth maps; its loao stage is R1's (same pairs, same options).
-  const auto r3 = PlanRunStages(runs[2], cache, StageVersions::Uniform("1"));
+  const auto r3 = PlanRunStages(runs[2], cache, v1);
   EXPECT_EQ(FindStage(r3, "truth-maps"), nullptr);
   EXPECT_NE(FindStage(r3, "tracker"), nullptr);
   EXPECT_EQ(FindStage(r3, "loao")->key, FindStage(r1, "loao")->key);
   EXPECT_NE(FindStage(r0, "loao")->key, FindStage(r1, "loao")->key);
   // The big size renders the scans at its size too: other scans than the small one's.
-  const auto big = PlanRunStages(runs[4], cache, StageVersions::Uniform("1"));
+  const auto big = PlanRunStages(runs[4], cache, v1);
   EXPECT_NE(FindStage(big, "scans")->key, FindStage(r1, "scans")->key);
   const auto& scan_argv = FindStage(big, "scans")->argv;
   EXPECT_NE(std::find(scan_argv.begin(), scan_argv.end(), "1280x720"), scan_argv.end());
@@ -406,7 +408,7 @@ TEST(Experiment, VariantsSweepBundlesOfSettingsAndTheLadderPlansItsRungs) {
   o.out = root / "out";
   o.cache = root / "cache";
   o.program_version = "1";
-  o.stage_versions = StageVersions::Uniform("1");
+  o.stage_versions = v1;
   const ExperimentSummary sum = RunExperiment(ParseExperimentConfig(kLadder, "ladder.yaml"), o, FakeExecute);
   EXPECT_EQ(sum.runs_ok, 6);
   const json run = ReadJsonFile(o.out / "runs" / "size=small_rung=R1_seed1.json");
@@ -429,8 +431,9 @@ TEST(Experiment, NestedAndDottedSectionsAreTheSameConfig) {
   EXPECT_EQ(nested.sections.at("capture"), dotted.sections.at("capture"));
   EXPECT_EQ(dotted.sections.at("capture").at("refinement.lk_window"), 15);
   const fs::path cache = "/tmp/cache";
-  EXPECT_EQ(KeysByKind(PlanRunStages(ExpandRuns(nested)[0], cache, StageVersions::Uniform("1"))),
-            KeysByKind(PlanRunStages(ExpandRuns(dotted)[0], cache, StageVersions::Uniform("1"))));
+  const StageVersions v1 = StageVersions::Uniform("1");
+  EXPECT_EQ(KeysByKind(PlanRunStages(ExpandRuns(nested)[0], cache, v1)),
+            KeysByKind(PlanRunStages(ExpandRuns(dotted)[0], cache, v1)));
 }
 
 // Every key of the nested option structs is registered once (issue 18: the landmark

@@ -93,7 +93,8 @@ void PrintDryRun(const std::vector<ExperimentConfig>& parsed, const RunArgs& a, 
     if (a.seeds > 0) c.seeds = a.seeds;
     const auto runs = ShardRuns(ExpandRuns(c), o.shard, o.num_shards);
     std::printf("%s: %zu runs\n", c.name.c_str(), runs.size());
-    std::set<std::string> unique, cached;
+    std::set<std::string> unique;       // keys of the stages (runs share some)
+    size_t cached = 0;
     std::map<std::string, int> to_run;  // kind → stages not in the cache
     for (const auto& r : runs) {
       std::printf("  %s\n", r.id.c_str());
@@ -102,14 +103,14 @@ void PrintDryRun(const std::vector<ExperimentConfig>& parsed, const RunArgs& a, 
         std::printf("    [%s %s%s] %s\n", s.kind.c_str(), s.key.c_str(), done ? " cached" : "",
                     ExperimentCommandLine(s.argv).c_str());
         if (!unique.insert(s.key).second) continue;
-        if (done) cached.insert(s.key);
+        if (done) ++cached;
         else ++to_run[s.kind];
       }
     }
     std::vector<std::string> parts;
     for (const auto& [kind, n] : to_run) parts.push_back(fmt::format("{} {}", n, kind));
-    std::printf("%s: %zu stages, %zu cached; to run: %s\n", c.name.c_str(), unique.size(), cached.size(),
-                parts.empty() ? "none" : fmt::format("{}", fmt::join(parts, ", ")).c_str());
+    const std::string left = parts.empty() ? "none" : fmt::format("{}", fmt::join(parts, ", "));
+    std::printf("%s: %zu stages, %zu cached; to run: %s\n", c.name.c_str(), unique.size(), cached, left.c_str());
   }
 }
 
