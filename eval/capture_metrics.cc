@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <map>
 #include <optional>
@@ -815,6 +816,37 @@ struct PreviousFrame {
   Eigen::VectorXd beta;             // the true expression
 };
 
+// The last frame's truth maps, reused while an expression is held: D* and its
+// band depend on the true expression β alone, the wrinkle layer's band on the
+// layer's texels alone. Reuse gives the same bytes as recomputing (the eval's
+// costliest steps: D*'s lowpass G and the bands' blurs).
+struct TruthMemo {
+  Eigen::VectorXd beta;
+  cv::Mat G, Gb;         // D*(β) at R×R and its wrinkle band (empty: none yet)
+  cv::Mat layer, Lb;     // the dataset's layer and its wrinkle band (empty: none yet)
+
+  // D*(β) and its band: recomputed unless β equals the last one exactly.
+  void Truth(const CaptureEvalContext& c, const Eigen::VectorXd& b, cv::Mat* g, cv::Mat* gb) {
+    if (G.empty() || beta.size() != b.size() || beta != b) {
+      beta = b;
+      G = ResampleSquareMap(c.detail_truth->Detail(b), c.R);
+      Gb = WrinkleBand(G, c.band_mask);
+    }
+    *g = G;
+    *gb = Gb;
+  }
+  // The layer's wrinkle band: recomputed unless the layer equals the last one texel for texel.
+  cv::Mat LayerBand(const CaptureEvalContext& c, const cv::Mat& l) {
+    const bool same = !Lb.empty() && layer.size() == l.size() && layer.type() == l.type() && l.isContinuous() &&
+                      std::memcmp(layer.data, l.data, l.total() * l.elemSize()) == 0;
+    if (!same) {
+      layer = l.clone();
+      Lb = WrinkleBand(l, c.band_mask);
+    }
+    return Lb;
+  }
+};
+
 // What the frame loop accumulates over the frames.
 struct FrameLoopState {
   explicit FrameLoopState(const CaptureEvalContext& c)
@@ -857,6 +889,7 @@ struct FrameLoopState {
   int error_vectors_frame = -1;
   int tracked_count = 0;
   PreviousFrame previous;
+  TruthMemo truth_memo;
 };
 
 // A tracked frame's truth at the tracking rig's vertices (head frame of the truth
@@ -1044,11 +1077,10 @@ bool IsActiveFrame(const CaptureEvalOptions& o, const FrameCaptureEval& e) {
 
 // Pools the frame's band (Db) into the displacement metrics of the frames where
 // it is active: against the truth (D, G, Gb) and against the dataset's wrinkle layer
-// (`layer`, static lines included: the truth of crease ≤ 0.3) when the truth is D*.
+// (its band Lb, static lines included: the truth of crease ≤ 0.3) when the truth is D*.
 void PoolDisplacement(const CaptureEvalContext& c, const cv::Mat& D, const cv::Mat& G, const cv::Mat& Db,
-                      const cv::Mat& Gb, const cv::Mat& layer, const FrameCaptureEval& e, FrameLoopState* st) {
+                      const cv::Mat& Gb, const cv::Mat& Lb, const FrameCaptureEval& e, FrameLoopState* st) {
   if (c.detail_truth) {
-    const cv::Mat Lb = WrinkleBand(layer, c.band_mask);
     if (CompareMaps(Db, Lb, c.wrinkle_mask).reference_rms_mm >= c.options.active_reference_rms_mm) {
       ++st->layer_active_frames;
       st->pooled_layer_band.Add(Db, Lb, c.wrinkle_mask);
@@ -1126,9 +1158,8 @@ void AddSlide(const CaptureEvalContext& c, const cv::Mat& du, const cv::Mat& dv,
 // (eval/registered_truth.h): D* raw and banded, and the wrinkle layer's band; and
 // the registered truth against the truth itself.
 void PoolRegisteredTruth(const CaptureEvalContext& c, const RigTruth& t, const CaptureFrameArrays& arrays,
-                         const cv::Mat& D, const cv::Mat& G, const cv::Mat& Db, const cv::Mat& Gb, const cv::Mat& layer,
+                         const cv::Mat& D, const cv::Mat& G, const cv::Mat& Db, const cv::Mat& Gb, const cv::Mat& Lb,
                          FrameLoopState* st) {
-  const cv::Mat Lb = WrinkleBand(layer, c.band_mask);
   const std::vector<cv::Mat> reg =
       st->registration->Register(t.true_cam, arrays.refined, {G, Gb, Lb, st->chart_u, st->chart_v});
   ++st->reg_frames;
@@ -1171,7 +1202,11 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
   if (!c.corr.same_uv || !fs::is_regular_file(d_path)) return d;
   d.D = ReadMap(d_path, c.R);
   const cv::Mat layer = ReadMap(c.info.DisplacementPath(index), c.R, /*resample=*/true);
-  const cv::Mat G = c.detail_truth ? ResampleSquareMap(c.detail_truth->Detail(beta), c.R) : layer;
+  cv::Mat G = layer, Gb, Lb;
+  if (c.detail_truth) {
+    st->truth_memo.Truth(c, beta, &G, &Gb);
+    Lb = st->truth_memo.LayerBand(c, layer);
+  }
   if (!c.options.truth_maps_dir.empty()) {
     WriteImage(fs::path(c.options.truth_maps_dir) / fmt::format("{:06d}.exr", index), G);
   }
@@ -1179,7 +1214,8 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
   e->has_displacement = true;
   e->d_face = CompareMaps(d.D, G, c.coverage);
   e->d_wrinkle = CompareMaps(d.D, G, c.wrinkle_mask);
-  const cv::Mat Db = WrinkleBand(d.D, c.band_mask), Gb = WrinkleBand(G, c.band_mask);
+  const cv::Mat Db = WrinkleBand(d.D, c.band_mask);
+  if (Gb.empty()) Gb = WrinkleBand(G, c.band_mask);
   e->d_face_band = CompareMaps(Db, Gb, c.coverage);
   e->d_wrinkle_band = CompareMaps(Db, Gb, c.wrinkle_mask);
   d.band_err = Db - Gb;
@@ -1189,9 +1225,9 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
     e->has_band_normals = true;
   }
   MeasureWrinkleOffset(c, Db, Gb, e);
-  PoolDisplacement(c, d.D, G, Db, Gb, layer, *e, st);
+  PoolDisplacement(c, d.D, G, Db, Gb, Lb, *e, st);
   if (st->registration && IsActiveFrame(c.options, *e)) {
-    PoolRegisteredTruth(c, t, arrays, d.D, G, Db, Gb, layer, st);
+    PoolRegisteredTruth(c, t, arrays, d.D, G, Db, Gb, Lb, st);
   }
   MeasureDisplacementJitter(c, st->previous, index, d.band_err, e);
   MeasureStillFace(c, st->previous, index, d.D, beta, e);

@@ -5,9 +5,11 @@
 #include <fmt/format.h>
 
 #include "apps/crease/commands.h"
+#include "core/allocator.h"
 #include "core/error.h"
 
 int main(int argc, char** argv) {
+  crease::KeepLargeBlocksInHeap();  // fewer page faults in frame loops (core/allocator.h)
   CLI::App app{"crease — a research harness for real-time high-fidelity facial performance capture\n"
                "(Cao, Bradley, Zhou and Beeler, SIGGRAPH 2015). Units are millimetres."};
   app.require_subcommand(1);
