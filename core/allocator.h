@@ -10,7 +10,7 @@
 // from the heap instead.
 //
 // Measured (crease eval, paper profile, 211 frames, 2-vCPU AMD EPYC, idle):
-// 140 s → 111 s, 2.87 M → 0.26 M minor faults, peak RSS unchanged (1.26 GB);
+// 140 s → 111 s, 2.9–3.6 M → 0.26 M minor faults, peak RSS unchanged (1.26 GB);
 // eval.json and eval_frames.csv byte-identical. Outputs never depend on it.
 #pragma once
 

@@ -1206,6 +1206,8 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
   if (c.detail_truth) {
     st->truth_memo.Truth(c, beta, &G, &Gb);
     Lb = st->truth_memo.LayerBand(c, layer);
+  } else {
+    Gb = WrinkleBand(G, c.band_mask);
   }
   if (!c.options.truth_maps_dir.empty()) {
     WriteImage(fs::path(c.options.truth_maps_dir) / fmt::format("{:06d}.exr", index), G);
@@ -1215,7 +1217,6 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
   e->d_face = CompareMaps(d.D, G, c.coverage);
   e->d_wrinkle = CompareMaps(d.D, G, c.wrinkle_mask);
   const cv::Mat Db = WrinkleBand(d.D, c.band_mask);
-  if (Gb.empty()) Gb = WrinkleBand(G, c.band_mask);
   e->d_face_band = CompareMaps(Db, Gb, c.coverage);
   e->d_wrinkle_band = CompareMaps(Db, Gb, c.wrinkle_mask);
   d.band_err = Db - Gb;
