@@ -33,6 +33,7 @@
 #include "core/uv_raster.h"
 #include "pipeline/capture/detail_regression.h"
 #include "pipeline/capture/poisson_fill.h"
+#include "pipeline/capture/reference_alignment.h"
 #include "pipeline/training/fern_cascade.h"
 #include "pipeline/training/pca.h"
 
@@ -281,6 +282,23 @@ void BM_AddWrinkleFrame(benchmark::State& state) {
   for (auto _ : state) r.AddWrinkleFrame(s.frames[i++ % s.frames.size()], s.seen[0]);
 }
 BENCHMARK(BM_AddWrinkleFrame)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The reference aligned to T^t (reference_alignment.h) at a flow grid of range(1)²:
+// the first wrinkle frame as the reference, the last one shifted by (5, −3) texels.
+void BM_AlignReference(benchmark::State& state) {
+  tbb::global_control threads(tbb::global_control::max_allowed_parallelism, state.range(0));
+  const Setup& s = TheSetup();
+  cv::Mat reference = s.frames.front().clone(), texture;
+  const cv::Mat shift = (cv::Mat_<double>(2, 3) << 1, 0, 5, 0, 1, -3);
+  cv::warpAffine(s.frames.back(), texture, shift, s.frames.back().size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+  reference.setTo(0.0f, s.chart == 0);
+  texture.setTo(0.0f, s.chart == 0);
+  ReferenceAlignmentOptions o;
+  o.enabled = true;
+  o.resolution = static_cast<int>(state.range(1));
+  for (auto _ : state) benchmark::DoNotOptimize(AlignReference(reference, texture, s.chart, o));
+}
+BENCHMARK(BM_AlignReference)->Args({1, 256})->Args({2, 256})->Args({2, 128})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // The regressor's own fill (its chart and patch coverage), alone.
 void BM_RegressorFill(benchmark::State& state) {

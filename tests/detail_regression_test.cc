@@ -298,6 +298,49 @@ TEST(DetailRegression, AReferenceTextureCancelsStaticFeaturesButKeepsWrinkles) {
   EXPECT_GT(Correlation(flat.Regress(t, cv::Mat()), truth, Chart()), 0.5);
 }
 
+// The tracker slides the texture over the face by a few texels in an expression: with
+// reference_alignment.warp_texture, T^t is resampled onto the most neutral frames'
+// registration, and D^t lands where the lines are in that registration.
+TEST(DetailRegression, WarpingTheTextureOntoTheReferenceUndoesASlide) {
+  cv::Mat skin(kS, kS, CV_32F);
+  Rng rng(11);
+  for (int y = 0; y < kS; ++y)
+    for (int x = 0; x < kS; ++x) skin.at<float>(y, x) = static_cast<float>(rng.Uniform(-1.0, 1.0));
+  cv::GaussianBlur(skin, skin, cv::Size(0, 0), 2.0);
+  skin *= 0.03 / cv::norm(skin, cv::NORM_INF);
+  // The frame with lines at `depth`, all of it slid down by `slide` texels.
+  auto frame = [&](double depth, double slide, cv::Mat* t, cv::Mat* d) {
+    Frame(depth, t, d);
+    *t += skin;
+    const cv::Mat m = (cv::Mat_<double>(2, 3) << 1, 0, 0, 0, 1, slide);
+    cv::warpAffine(*t, *t, m, t->size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+  };
+  DetailRegressionOptions o = SmallOptions();
+  o.reference_alignment.resolution = 64;
+  o.reference_alignment.highpass_sigma = 4.0;
+  o.reference_alignment.smoothing_sigma = 3.0;
+  DetailRegressionOptions aligned_options = o;
+  aligned_options.reference_alignment.enabled = true;
+  aligned_options.reference_alignment.warp_texture = true;
+  DetailRegressor plain(TinyModel(), {}, Chart(), o), aligned(TinyModel(), {}, Chart(), aligned_options);
+  for (double depth : {0.0, 0.2, 0.15, 0.1}) {
+    cv::Mat t, d;
+    frame(depth, 0.0, &t, &d);
+    plain.AddWrinkleFrame(t, cv::Mat(), depth);
+    aligned.AddWrinkleFrame(t, cv::Mat(), depth);
+  }
+  plain.FixLayout();
+  aligned.FixLayout();
+  cv::Mat t, truth;
+  frame(0.18, 4.0, &t, &truth);
+  DetailTiming timing;
+  const double c_plain = Correlation(plain.Regress(t, cv::Mat()), truth, Chart());
+  const double c_aligned = Correlation(aligned.Regress(t, cv::Mat(), &timing), truth, Chart());
+  EXPECT_GT(c_aligned, 0.5);
+  EXPECT_GT(c_aligned, c_plain + 0.2) << "plain " << c_plain;
+  EXPECT_NEAR(timing.reference_shift, 2.0, 0.5);  // 4 texels on the 64² flow grid of a 128² map
+}
+
 TEST(DetailRegression, WrinkleMapIgnoresOcclusionBorders) {
   // Frames with no lines; in two of them one half of the chart is unseen (0 in T^t).
   // Every texel is seen in at least 3 of 4 frames, so only the extension of the seen

@@ -118,6 +118,7 @@ const std::map<std::string, OptionsType>& AllOptions() {
       {"MesoscopicOptions", TypeOf<MesoscopicOptions>()},
       {"DetailRegressionOptions", TypeOf<DetailRegressionOptions>()},
       {"PoissonFillOptions", TypeOf<PoissonFillOptions>()},
+      {"ReferenceAlignmentOptions", TypeOf<ReferenceAlignmentOptions>()},
       {"ExperimentDataset", TypeOf<ExperimentDataset>()},
       {"CaptureEvalOptions", TypeOf<CaptureEvalOptions>()},
       {"TrackerTrainingOptions", TypeOf<TrackerTrainingOptions>()},

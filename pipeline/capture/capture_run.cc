@@ -60,6 +60,7 @@ json CapturedFrameJson(const CapturedFrame& f, const FaceRig& rig) {
                        {"cam_from_head", PoseJson(r.fit.cam_from_head)}};
   }
   const CaptureTiming& ct = f.timing;
+  if (ct.detail.reference_shift >= 0) j["reference_shift"] = ct.detail.reference_shift;  // coarse texels
   j["timing_ms"] = {{"landmarks", ct.landmarks_ms}, {"fit", ct.fit_ms},          {"visibility", ct.visibility_ms},
                     {"refine", ct.refine_ms},       {"texture", ct.texture_ms},  {"mesoscopic", ct.mesoscopic_ms},
                     {"detail", ct.detail_ms},       {"hifi", ct.hifi_ms},        {"wrinkle_map", ct.wrinkle_map_ms},

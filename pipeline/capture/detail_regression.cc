@@ -28,6 +28,7 @@ void DetailRegressionOptions::VisitFields(OptionVisitor& v) {
   v.Field("patch_max_unseen_fraction", patch_max_unseen_fraction);
   v.Field("gate_by_response", gate_by_response);
   v.Section("fill", fill);
+  v.Section("reference_alignment", reference_alignment);
 }
 
 void DetailRegressionOptions::Check() const {
@@ -39,6 +40,7 @@ void DetailRegressionOptions::Check() const {
   CheckGe(o, "patch_max_unseen_fraction", patch_max_unseen_fraction, 0.0);
   CheckLe(o, "patch_max_unseen_fraction", patch_max_unseen_fraction, 1.0);
   fill.Check();
+  reference_alignment.Check();
 }
 
 namespace {
@@ -92,11 +94,36 @@ struct DetailRegressor::Impl {
   double reference_mean = 0.0;
 
   bool flattens() const { return model.wrinkle.texture_reference != TextureReference::kNone; }
-  // `gray` as the map and the patches read it: flattened after FixLayout in mode
-  // ratio or difference, itself otherwise.
-  cv::Mat Input(const cv::Mat& gray, const cv::Mat& seen) const {
-    if (!flattens()) return gray.isContinuous() ? gray : gray.clone();
-    return FlattenByReference(gray, reference, SeenChart(seen), model.wrinkle.texture_reference, reference_mean);
+  // Difference 6's alignment (reference_alignment.h): T^t onto the reference, or the
+  // reference onto T^t (only where it flattens).
+  bool warps_texture() const { return options.reference_alignment.enabled && options.reference_alignment.warp_texture; }
+  bool warps_reference() const {
+    return flattens() && options.reference_alignment.enabled && !options.reference_alignment.warp_texture;
+  }
+  // Frames wait for the reference (FixLayout) when it flattens or warps T^t.
+  bool holds() const { return flattens() || warps_texture(); }
+  // A frame as the map and the patches read it, and its seen mask.
+  struct Frame {
+    cv::Mat gray, seen;
+  };
+  // `gray` after FixLayout: warped onto the reference (warps_texture), then flattened
+  // by the reference (aligned to it when warps_reference) in mode ratio or difference;
+  // itself otherwise. `report`: the alignment's.
+  Frame Input(const cv::Mat& gray, const cv::Mat& seen, ReferenceAlignmentReport* report = nullptr) const {
+    if (!holds()) return {gray.isContinuous() ? gray : gray.clone(), seen};
+    Frame f{gray, SeenChart(seen)};
+    if (warps_texture()) {
+      AlignTextureToReference(reference, gray, f.seen, options.reference_alignment, &f.gray, &f.seen, report);
+      cv::bitwise_and(f.seen, coverage, f.seen);
+    }
+    if (flattens()) {
+      const cv::Mat ref = warps_reference()
+                              ? AlignReference(reference, f.gray, f.seen, options.reference_alignment, report)
+                              : reference;
+      f.gray = FlattenByReference(f.gray, ref, f.seen, model.wrinkle.texture_reference, reference_mean);
+    }
+    if (!warps_texture()) f.seen = seen;  // the frame's own mask, as without a reference
+    return f;
   }
   // The chart texels seen in a frame (coverage ∧ seen; empty seen = all).
   cv::Mat SeenChart(const cv::Mat& seen) const {
@@ -255,7 +282,7 @@ void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen, 
   cv::add(m.seen_count, cv::Scalar(1), m.seen_count, seen_chart);
   ++m.frames;
   if (!map_texture.empty()) m.RequireFrame(map_texture, cv::Mat(), "DetailRegressor::AddWrinkleFrame map texture");
-  if (m.flattens()) {  // the map waits for the reference (FixLayout)
+  if (m.holds()) {  // the map waits for the reference (FixLayout)
     m.held_gray.push_back(gray.clone());
     m.held_seen.push_back(seen_chart);
     m.held_map.push_back(map_texture.empty() ? cv::Mat() : map_texture.clone());
@@ -312,14 +339,15 @@ void DetailRegressor::FixLayout() {
   Require(m.frames > 0, "DetailRegressor::FixLayout: no wrinkle frames were added (call AddWrinkleFrame with the "
                         "first N frames' textures first, Sec. 5.2)");
   const int R = m.R;
-  if (m.flattens()) {
+  if (m.holds()) {
     m.FixReference();
     for (size_t k = 0; k < m.held_gray.size(); ++k) {
-      m.AddToMap(m.held_map[k].empty()
-                     ? FlattenByReference(m.held_gray[k], m.reference, m.held_seen[k],
-                                          m.model.wrinkle.texture_reference, m.reference_mean)
-                     : m.held_map[k],
-                 m.held_seen[k]);
+      if (!m.held_map[k].empty()) {
+        m.AddToMap(m.held_map[k], m.held_seen[k]);
+        continue;
+      }
+      const Impl::Frame f = m.Input(m.held_gray[k], m.held_seen[k]);
+      m.AddToMap(f.gray, f.seen);
     }
     m.held_gray.clear();
     m.held_seen.clear();
@@ -432,13 +460,20 @@ cv::Mat DetailRegressor::Regress(const cv::Mat& gray, const cv::Mat& seen, Detai
   }
   const int w = m.layout.patch_size, n = w * w, Dim = m.model.pca.dimensions();
 
-  // 1. Sample t_i on the fixed layout; which patches drop out this frame.
+  // 0. The input: T^t, or T^t flattened by the (aligned) reference.
   auto t0 = Clock::now();
-  const cv::Mat src = m.Input(gray, seen);
+  ReferenceAlignmentReport alignment;
+  const Impl::Frame input = m.Input(gray, seen, &alignment);
+  const cv::Mat& src = input.gray;
+  if (m.warps_texture() || m.warps_reference()) t.reference_shift = alignment.mean_shift;
+  t.align_ms = MsSince(t0);
+
+  // 1. Sample t_i on the fixed layout; which patches drop out this frame.
+  t0 = Clock::now();
   Eigen::MatrixXf sampled;  // N × n, column-major (PatchSampler's layout)
   m.sampler->Sample(src, &sampled);
   RowMatrixXf patches = sampled;  // one patch per row, for RegressBatch
-  const std::vector<uint8_t> drop = m.Drops(src, seen);
+  const std::vector<uint8_t> drop = m.Drops(src, input.seen);
   int dropped = 0;
   for (uint8_t d : drop) dropped += d;
   t.dropped = dropped;
@@ -509,7 +544,8 @@ std::vector<uint8_t> DetailRegressor::DroppedPatches(const cv::Mat& gray, const 
   Require(m.fixed, "DetailRegressor::DroppedPatches: the layout is not fixed yet");
   m.RequireFrame(gray, seen, "DetailRegressor::DroppedPatches");
   if (m.layout.num_patches() == 0) return {};
-  return m.Drops(m.Input(gray, seen), seen);
+  const Impl::Frame input = m.Input(gray, seen);
+  return m.Drops(input.gray, input.seen);
 }
 
 const WrinkleMap& DetailRegressor::wrinkle_map() const {

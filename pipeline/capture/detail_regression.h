@@ -84,6 +84,15 @@
 //      gate keeps 91 of 200 patches and removes that groove ([−0.058, 0.058] mm).
 //   5. Step 4 "average" is the bilinear-weighted average of PatchSampler::Splat
 //      (patches.h, Difference 3).
+//   6. With the model's texture_reference ratio or difference (wrinkle_map.h,
+//      Difference 6; not in the paper) T^t is flattened by a reference: the per-texel
+//      median of the most neutral quarter of the first N frames. Optionally
+//      (reference_alignment.enabled) the reference is first aligned to each T^t by
+//      dense flow in UV (reference_alignment.h), against the tracker's slide; with
+//      reference_alignment.warp_texture T^t is aligned to that reference instead
+//      (also without flattening), so that D^t follows the neutral frames'
+//      registration. The wrinkle map's per-texel frame counts J_p stay those of the
+//      unaligned frames.
 #pragma once
 
 #include <cstdint>
@@ -95,6 +104,7 @@
 
 #include "core/face_rig.h"
 #include "pipeline/capture/poisson_fill.h"
+#include "pipeline/capture/reference_alignment.h"
 #include "pipeline/training/detail_model.h"
 #include "pipeline/training/patches.h"
 #include "pipeline/training/wrinkle_map.h"
@@ -121,6 +131,10 @@ struct DetailRegressionOptions {
   // pair-selection rule, Sec. 4.2; not in the paper's capture). Default off (the paper).
   bool gate_by_response = false;
   PoissonFillOptions fill;  // Sec. 5.2 Poisson fill (poisson_fill.h)
+  // Difference 6 (reference_alignment.h; off by default): align the reference to every
+  // T^t before flattening (with the model's texture_reference ratio or difference), or
+  // with warp_texture, T^t to the reference (with or without flattening).
+  ReferenceAlignmentOptions reference_alignment;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
@@ -128,6 +142,7 @@ struct DetailRegressionOptions {
 
 // Wall time of the steps of one Regress call, milliseconds.
 struct DetailTiming {
+  double align_ms = 0;        // 0: the reference aligned to T^t (reference_alignment.h; 0 when off)
   double sample_ms = 0;       // 1: patches sampled (and transposed), seen / gate checks
   double regress_ms = 0;      // 2: Eq. 6, the fern cascade
   double reconstruct_ms = 0;  // 3: PCA reconstruction
@@ -135,7 +150,10 @@ struct DetailTiming {
   double fill_ms = 0;         // 5: Poisson fill
   int patches = 0;            // patches of the layout
   int dropped = 0;            // patches dropped this frame (unseen or gated)
-  double total_ms() const { return sample_ms + regress_ms + reconstruct_ms + merge_ms + fill_ms; }
+  // Not a time: the reference alignment's mean shift this frame, texels of its grid
+  // (ReferenceAlignmentReport::mean_shift); −1 when the alignment is off.
+  double reference_shift = -1.0;
+  double total_ms() const { return align_ms + sample_ms + regress_ms + reconstruct_ms + merge_ms + fill_ms; }
 };
 
 class DetailRegressor {
