@@ -153,6 +153,13 @@ json BandNormalsJson(const BandNormals& b) {
           {"full_deg", b.full_deg}};
 }
 
+// {region: ComparisonJson} of the per-region comparisons (their band with `band`).
+json RegionComparisonsJson(const std::vector<CaptureEvalSummary::RegionComparison>& regions, bool band) {
+  json j = json::object();
+  for (const auto& r : regions) j[r.region] = ComparisonJson(band ? r.band : r.detail);
+  return j;
+}
+
 double Amp(const MapComparison& c) { return c.reference_rms_mm > 0 ? c.extracted_rms_mm / c.reference_rms_mm : 0.0; }
 
 void Accumulate(const SurfaceError& s, SurfaceError* sum) {
@@ -664,6 +671,8 @@ struct CaptureEvalContext {
   // UV maps of the face chart, R×R (the capture's map resolution).
   int R = 0;
   cv::Mat coverage, wrinkle_mask, offset_mask;
+  // Each wrinkle region's own mask (options.wrinkle_regions; empty regions left out).
+  std::vector<std::pair<std::string, cv::Mat>> region_masks;
   double mm_per_texel = 0;
   WrinkleBandMask band_mask;
   WrinkleBandMask normal_low_mask;  // the band normal error's lower edge (normal_band_low_mm)
@@ -737,6 +746,10 @@ void CaptureEvalContext::SetUpFaceChart() {
   R = cap.value("map_resolution", 1024);
   coverage = CoverageMask(RasterizeUv(face_mesh, R, R, "rig face chart"));
   wrinkle_mask = ValidRegionMask(rig.regions, options.wrinkle_regions, R, coverage);
+  for (const std::string& name : options.wrinkle_regions) {
+    cv::Mat m = ValidRegionMask(rig.regions, {name}, R, coverage);
+    if (cv::countNonZero(m) > 0) region_masks.emplace_back(name, std::move(m));
+  }
   mm_per_texel = std::max(MmPerTexel(face_mesh, R), 1e-9);
   band_mask = MakeWrinkleBandMask(coverage, options.band_mm / mm_per_texel);
   normal_low_mask = MakeWrinkleBandMask(coverage, options.normal_band_low_mm / mm_per_texel);
@@ -884,6 +897,7 @@ struct FrameLoopState {
   int slide_frames = 0;
   // Displacement pooled over the active frames (and those where the wrinkle layer is active).
   MapMoments pooled_face, pooled_wrinkle, pooled_band, pooled_layer_band;
+  std::vector<MapMoments> pooled_region, pooled_region_band;  // per CaptureEvalContext::region_masks
   int active_frames = 0, layer_active_frames = 0;
   cv::Mat error_vectors;  // Fig. 11's picture, once drawn
   int error_vectors_frame = -1;
@@ -1091,6 +1105,12 @@ void PoolDisplacement(const CaptureEvalContext& c, const cv::Mat& D, const cv::M
     st->pooled_face.Add(D, G, c.coverage);
     st->pooled_wrinkle.Add(D, G, c.wrinkle_mask);
     st->pooled_band.Add(Db, Gb, c.wrinkle_mask);
+    st->pooled_region.resize(c.region_masks.size());
+    st->pooled_region_band.resize(c.region_masks.size());
+    for (size_t k = 0; k < c.region_masks.size(); ++k) {
+      st->pooled_region[k].Add(D, G, c.region_masks[k].second);
+      st->pooled_region_band[k].Add(Db, Gb, c.region_masks[k].second);
+    }
   }
 }
 
@@ -1431,6 +1451,8 @@ CaptureEvalSummary ReduceSummary(const CaptureEvalContext& c, const FrameLoopSta
   s.d_face = st.pooled_face.Result();
   s.d_wrinkle = st.pooled_wrinkle.Result();
   s.d_wrinkle_band = st.pooled_band.Result();
+  for (size_t k = 0; k < st.pooled_region.size(); ++k)
+    s.d_by_region.push_back({c.region_masks[k].first, st.pooled_region[k].Result(), st.pooled_region_band[k].Result()});
   s.d_layer_band = st.pooled_layer_band.Result();
   if (st.appearance) s.appearance = st.appearance->Result();
   s.registered = {st.reg_frames,           st.reg_detail.Result(),     st.reg_band.Result(),
@@ -1500,6 +1522,8 @@ std::string CaptureEvalSummary::ToJson() const {
                        {"face", ComparisonJson(d_face)},
                        {"wrinkle_regions", ComparisonJson(d_wrinkle)},
                        {"wrinkle_regions_band", ComparisonJson(d_wrinkle_band)},
+                       {"by_region", RegionComparisonsJson(d_by_region, false)},
+                       {"by_region_band", RegionComparisonsJson(d_by_region, true)},
                        {"truth", detail_truth},
                        {"wrinkle_layer_band", ComparisonJson(d_layer_band)},
                        {"wrinkle_layer_active_frames", layer_active_frames},
@@ -1728,6 +1752,12 @@ std::string CaptureEvalSummary::ToMarkdown() const {
       if (c.texels == 0) continue;
       o << fmt::format("| {} | {:.4f} | {:.3f} | {:.2f} | {:.4f} |\n", name, c.rmse_mm, c.correlation, Amp(c),
                        c.reference_rms_mm);
+    }
+    for (const auto& r : d_by_region) {
+      if (r.detail.texels == 0) continue;
+      o << fmt::format("| {} (band: correlation {:.3f}, amplitude {:.2f}) | {:.4f} | {:.3f} | {:.2f} | {:.4f} |\n",
+                       r.region, r.band.correlation, Amp(r.band), r.detail.rmse_mm, r.detail.correlation,
+                       Amp(r.detail), r.detail.reference_rms_mm);
     }
     o << fmt::format("\nD^t jitter (frame-to-frame change of the band error, wrinkle regions): {:.4f} mm\n",
                      d_jitter_mm);

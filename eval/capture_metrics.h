@@ -231,6 +231,14 @@ struct CaptureEvalSummary {
   // correlation or amplitude ratio of a frame without wrinkles means nothing).
   int active_frames = 0;
   MapComparison d_face, d_wrinkle, d_wrinkle_band;
+  // The same over each of the wrinkle regions alone (name, D*, its band), in the order
+  // of CaptureEvalOptions::wrinkle_regions, regions without texels left out: where on
+  // the face the regressed detail matches and where it does not.
+  struct RegionComparison {
+    std::string region;
+    MapComparison detail, band;
+  };
+  std::vector<RegionComparison> d_by_region;
   // D^t's wrinkle band against the dataset's wrinkle layer alone (the studio's lines,
   // static ones included, without the coarse band: the truth of crease ≤ 0.3),
   // wrinkle regions, frames where that layer is active.

@@ -131,8 +131,16 @@ b, full, true, albedo = s["band"], s["full"], s["true_detail"], s["mesoscopic_al
 print(f"band normal error: L~^t {b['coarse_deg']:.3f}, L~^t + D* {b['detail_deg']:.4f} deg; "
       f"surface: H^t {full['normal_deg']:.3f}, true detail {true['normal_deg']:.3f} deg; "
       f"D^HF made of the true albedo: correlation {albedo['correlation']:.4f} with the albedo's D^HF")
+# Each wrinkle region's own figures (displacement.by_region, its band): the truth itself
+# correlates 1 with the truth wherever the truth varies.
+d = json.load(open(sys.argv[1]))["displacement"]
+regions = [(k, r) for key in ("by_region", "by_region_band") for k, r in d[key].items()]
+varying = [(k, r) for k, r in regions if r["texels"] > 0 and r["reference_rms_mm"] > 1e-6]
+print("by region: " + ", ".join(f"{k} {r['correlation']:.4f}" for k, r in varying))
 sys.exit(0 if b["coarse_deg"] > 0.01 and b["detail_deg"] < 1e-4 and abs(full["normal_deg"] - true["normal_deg"]) < 1e-4
-         and albedo["correlation"] > 0.999 else 1)
+         and albedo["correlation"] > 0.999 and len(varying) >= 2 and all(r["correlation"] > 0.999 for _, r in varying)
+         and set(d["by_region"]) <= {"forehead", "glabella", "left_eye", "right_eye", "left_cheek", "right_cheek", "nose", "mouth"}
+         else 1)
 PY
 # The truth registered through the image (eval/registered_truth.h): the texture of the
 # ground-truth fit slides less on the face than the prior control's, and keeps the truth.
