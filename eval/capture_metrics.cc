@@ -863,7 +863,9 @@ struct TruthMemo {
 // What the frame loop accumulates over the frames.
 struct FrameLoopState {
   explicit FrameLoopState(const CaptureEvalContext& c)
-      : lk_meter(c.cap_options.refinement) {
+      : lk_meter(c.cap_options.refinement),
+        pooled_region(c.region_masks.size()),
+        pooled_region_band(c.region_masks.size()) {
     if (c.options.appearance.enabled && c.detail_truth) {
       appearance.emplace(c.capture, c.dataset, c.cap_options.texture, c.rig, c.truth_rig, c.K, c.frames,
                          [&c](int index) { return c.FramePath(index); }, c.info, c.wrinkle_mask,
@@ -1105,8 +1107,6 @@ void PoolDisplacement(const CaptureEvalContext& c, const cv::Mat& D, const cv::M
     st->pooled_face.Add(D, G, c.coverage);
     st->pooled_wrinkle.Add(D, G, c.wrinkle_mask);
     st->pooled_band.Add(Db, Gb, c.wrinkle_mask);
-    st->pooled_region.resize(c.region_masks.size());
-    st->pooled_region_band.resize(c.region_masks.size());
     for (size_t k = 0; k < c.region_masks.size(); ++k) {
       st->pooled_region[k].Add(D, G, c.region_masks[k].second);
       st->pooled_region_band[k].Add(Db, Gb, c.region_masks[k].second);

@@ -1,4 +1,4 @@
-// AlignReference (pipeline/capture/reference_alignment.h): a reference texture shifted
+// ReferenceAligner (pipeline/capture/reference_alignment.h): a reference texture shifted
 // against T^t comes back registered to it; an aligned pair stays as it is; bad input
 // is refused.
 #include "pipeline/capture/reference_alignment.h"
@@ -66,7 +66,7 @@ TEST(ReferenceAlignment, RegistersAShiftedReference) {
   // The reference shows the face 6.5 texels right and 4.25 down of where T^t shows it.
   const cv::Mat reference = Shifted(base, chart, -6.5f, 4.25f);
   ReferenceAlignmentReport report;
-  const cv::Mat aligned = AlignReference(reference, texture, cv::Mat(), Enabled(), &report);
+  const cv::Mat aligned = ReferenceAligner(reference, Enabled()).AlignReference(texture, cv::Mat(), &report);
   const double before = InnerRms(reference, texture), after = InnerRms(aligned, texture);
   EXPECT_LT(after, 0.15 * before) << "before " << before << ", after " << after;
   // The shift in coarse texels (512 / 128 = 4 fine texels each): |(6.5, 4.25)| / 4.
@@ -81,7 +81,7 @@ TEST(ReferenceAlignment, RegistersAShiftedTextureToTheReference) {
   const cv::Mat texture = Shifted(base, chart, 5.0f, -3.5f);
   cv::Mat aligned, aligned_seen;
   ReferenceAlignmentReport report;
-  AlignTextureToReference(reference, texture, chart, Enabled(), &aligned, &aligned_seen, &report);
+  ReferenceAligner(reference, Enabled()).AlignTexture(texture, chart, &aligned, &aligned_seen, &report);
   const double before = InnerRms(texture, reference), after = InnerRms(aligned, reference);
   EXPECT_LT(after, 0.15 * before) << "before " << before << ", after " << after;
   EXPECT_NEAR(report.mean_shift, std::hypot(5.0, 3.5) / 4.0, 0.3);
@@ -100,7 +100,7 @@ TEST(ReferenceAlignment, LeavesAnAlignedPairAlone) {
     for (int x = 0; x < kR; ++x) ramp.at<float>(y, x) = 0.8f + 0.4f * static_cast<float>(x) / kR;
   const cv::Mat reference = texture.mul(ramp);
   ReferenceAlignmentReport report;
-  const cv::Mat aligned = AlignReference(reference, texture, cv::Mat(), Enabled(), &report);
+  const cv::Mat aligned = ReferenceAligner(reference, Enabled()).AlignReference(texture, cv::Mat(), &report);
   EXPECT_LT(report.mean_shift, 0.1);
   EXPECT_LT(InnerRms(aligned, reference), 0.004);
 }
@@ -111,7 +111,7 @@ TEST(ReferenceAlignment, KeepsTheChartsEdgeAndNoData) {
   cv::Mat texture = base.clone();
   texture.setTo(0.0f, chart == 0);
   const cv::Mat reference = Shifted(base, chart, 3.0f, 0.0f);
-  const cv::Mat aligned = AlignReference(reference, texture, cv::Mat(), Enabled());
+  const cv::Mat aligned = ReferenceAligner(reference, Enabled()).AlignReference(texture, cv::Mat());
   // No texel of the result darker than the chart's darkest (no 0 mixed in at the edge),
   // and nothing outside the chart that the flow could not have brought in.
   double lo = 0.0;
@@ -128,17 +128,18 @@ TEST(ReferenceAlignment, KeepsTheChartsEdgeAndNoData) {
 TEST(ReferenceAlignment, RefusesBadInput) {
   const cv::Mat a(kR, kR, CV_32F, cv::Scalar(0.5));
   ReferenceAlignmentOptions o = Enabled();
-  EXPECT_THROW(AlignReference(a, cv::Mat(kR / 2, kR / 2, CV_32F, cv::Scalar(0.5)), cv::Mat(), o), Error);
-  EXPECT_THROW(AlignReference(a, cv::Mat(kR, kR, CV_8U, cv::Scalar(1)), cv::Mat(), o), Error);
-  EXPECT_THROW(AlignReference(a, a, cv::Mat(kR, kR, CV_32F), o), Error);
+  const ReferenceAligner aligner(a, o);
+  EXPECT_THROW(aligner.AlignReference(cv::Mat(kR / 2, kR / 2, CV_32F, cv::Scalar(0.5)), cv::Mat()), Error);
+  EXPECT_THROW(aligner.AlignReference(cv::Mat(kR, kR, CV_8U, cv::Scalar(1)), cv::Mat()), Error);
+  EXPECT_THROW(aligner.AlignReference(a, cv::Mat(kR, kR, CV_32F)), Error);
   o.resolution = 100;  // 512 is not a multiple
-  EXPECT_THROW(AlignReference(a, a, cv::Mat(), o), Error);
+  EXPECT_THROW(ReferenceAligner(a, o), Error);
   o = Enabled();
   o.max_shift = 0.0;
-  EXPECT_THROW(AlignReference(a, a, cv::Mat(), o), Error);
+  EXPECT_THROW(ReferenceAligner(a, o), Error);
   // A featureless reference: returned unchanged, no shift.
   ReferenceAlignmentReport report;
-  const cv::Mat out = AlignReference(a, a, cv::Mat(), Enabled(), &report);
+  const cv::Mat out = ReferenceAligner(a, Enabled()).AlignReference(a, cv::Mat(), &report);
   EXPECT_EQ(cv::norm(out, a, cv::NORM_INF), 0.0);
   EXPECT_EQ(report.mean_shift, 0.0);
 }

@@ -92,6 +92,7 @@ struct DetailRegressor::Impl {
   std::vector<double> held_expression;
   cv::Mat reference;
   double reference_mean = 0.0;
+  std::optional<ReferenceAligner> aligner;  // the reference prepared once (reference_alignment.enabled)
 
   bool flattens() const { return model.wrinkle.texture_reference != TextureReference::kNone; }
   // Difference 6's alignment (reference_alignment.h): T^t onto the reference, or the
@@ -113,13 +114,11 @@ struct DetailRegressor::Impl {
     if (!holds()) return {gray.isContinuous() ? gray : gray.clone(), seen};
     Frame f{gray, SeenChart(seen)};
     if (warps_texture()) {
-      AlignTextureToReference(reference, gray, f.seen, options.reference_alignment, &f.gray, &f.seen, report);
+      aligner->AlignTexture(gray, f.seen, &f.gray, &f.seen, report);
       cv::bitwise_and(f.seen, coverage, f.seen);
     }
     if (flattens()) {
-      const cv::Mat ref = warps_reference()
-                              ? AlignReference(reference, f.gray, f.seen, options.reference_alignment, report)
-                              : reference;
+      const cv::Mat ref = warps_reference() ? aligner->AlignReference(f.gray, f.seen, report) : reference;
       f.gray = FlattenByReference(f.gray, ref, f.seen, model.wrinkle.texture_reference, reference_mean);
     }
     if (!warps_texture()) f.seen = seen;  // the frame's own mask, as without a reference
@@ -147,6 +146,7 @@ struct DetailRegressor::Impl {
     }
     reference = MedianTexture(gray, seen);
     reference_mean = ReferenceMean(reference, coverage);
+    if (options.reference_alignment.enabled) aligner.emplace(reference, options.reference_alignment);
   }
 
   void RequireFrame(const cv::Mat& gray, const cv::Mat& seen, const char* what) const {

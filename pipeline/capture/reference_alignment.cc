@@ -110,9 +110,10 @@ cv::Mat CoarseFlow(const cv::Mat& from8, const cv::Mat& to8, const cv::Mat& both
       const double len = std::hypot(f[0], f[1]);
       if (len > o.max_shift) f *= static_cast<float>(o.max_shift / len);
       if (both.at<float>(y, x) == 0.0f) continue;
-      sum += std::min(len, o.max_shift);
+      const double kept = std::min(len, o.max_shift);
+      sum += kept;
       count += 1.0;
-      largest = std::max(largest, std::min(len, o.max_shift));
+      largest = std::max(largest, kept);
     }
   if (report) *report = {count > 0 ? sum / count : 0.0, largest};
   return flow;
@@ -150,82 +151,89 @@ cv::Mat Resample(const cv::Mat& image, const cv::Mat& valid, const cv::Mat& coar
   return out;
 }
 
-void RequireInputs(const cv::Mat& reference, const cv::Mat& texture, const cv::Mat& seen, int resolution) {
-  Require(reference.type() == CV_32FC1 && texture.type() == CV_32FC1,
-          fmt::format("AlignReference: expected CV_32FC1 reference and texture, got types {} and {}", reference.type(),
-                      texture.type()));
-  Require(!reference.empty() && reference.rows == reference.cols && texture.size() == reference.size(),
-          fmt::format("AlignReference: reference {}×{} and texture {}×{} must be equal squares", reference.cols,
-                      reference.rows, texture.cols, texture.rows));
-  Require(seen.empty() || (seen.type() == CV_8UC1 && seen.size() == texture.size()),
-          "AlignReference: the seen mask must be CV_8UC1 of the texture's size");
+void RequireReference(const cv::Mat& reference, int resolution) {
+  Require(reference.type() == CV_32FC1,
+          fmt::format("ReferenceAligner: expected a CV_32FC1 reference, got type {}", reference.type()));
+  Require(!reference.empty() && reference.rows == reference.cols,
+          fmt::format("ReferenceAligner: the reference is {}×{}, expected a square map", reference.cols, reference.rows));
   Require(reference.rows % resolution == 0 && reference.rows >= resolution,
-          fmt::format("AlignReference: the map's side {} is not a multiple of the flow grid's {} "
+          fmt::format("ReferenceAligner: the map's side {} is not a multiple of the flow grid's {} "
                       "(detail.reference_alignment.resolution)",
                       reference.rows, resolution));
 }
 
-// One texture on the coarse grid, high-passed (step 1), with its full-grid validity.
-struct FlowInput {
-  cv::Mat valid;     // CV_32F R×R, 1 where the texture holds data
-  cv::Mat coarse_valid, highpass;  // coarse grid
-};
-
-FlowInput PrepareFlowInput(const cv::Mat& image, const cv::Mat& seen, const ReferenceAlignmentOptions& o) {
-  cv::Mat mask = image > kNoData;
-  if (!seen.empty()) cv::bitwise_and(mask, seen != 0, mask);
-  FlowInput in;
-  mask.convertTo(in.valid, CV_32F, 1.0 / 255.0);
-  cv::Mat coarse;
-  ToCoarse(image, in.valid, o.resolution, &coarse, &in.coarse_valid);
-  in.highpass = HighPass(coarse, in.coarse_valid, o.highpass_sigma);
-  return in;
+void RequireTexture(const cv::Mat& reference, const cv::Mat& texture, const cv::Mat& seen) {
+  Require(texture.type() == CV_32FC1,
+          fmt::format("ReferenceAligner: expected a CV_32FC1 texture, got type {}", texture.type()));
+  Require(texture.size() == reference.size(),
+          fmt::format("ReferenceAligner: the texture is {}×{}, the reference {}×{}", texture.cols, texture.rows,
+                      reference.cols, reference.rows));
+  Require(seen.empty() || (seen.type() == CV_8UC1 && seen.size() == texture.size()),
+          "ReferenceAligner: the seen mask must be CV_8UC1 of the texture's size");
 }
 
-// Steps 1–3 for both directions: the flow f with from(x) ≈ to(x + f(x)), or an empty
-// Mat when the reference is featureless (nothing to align to). The 8-bit scale comes
-// from the reference, so both images share it.
-cv::Mat AlignmentFlow(const FlowInput& reference, const FlowInput& texture, bool texture_to_reference,
-                      const ReferenceAlignmentOptions& o, ReferenceAlignmentReport* report) {
-  cv::Scalar mean, stddev;
-  cv::meanStdDev(reference.highpass, mean, stddev, reference.coarse_valid != 0.0f);
-  if (!(stddev[0] > 0.0)) {
-    if (report) *report = {};
-    return cv::Mat();
-  }
-  const double gain = 32.0 / stddev[0];  // ±4 standard deviations fill the 8 bits
-  const cv::Mat ref8 = ToFlowImage(reference.highpass, reference.coarse_valid, gain);
-  const cv::Mat tex8 = ToFlowImage(texture.highpass, texture.coarse_valid, gain);
-  const cv::Mat both = reference.coarse_valid.mul(texture.coarse_valid);
-  return texture_to_reference ? CoarseFlow(tex8, ref8, both, o, report) : CoarseFlow(ref8, tex8, both, o, report);
+// Step 1 on one texture: its full-grid validity (CV_32F 0/1), and on the coarse grid
+// its validity and high-pass.
+void PrepareFlowInput(const cv::Mat& image, const cv::Mat& seen, const ReferenceAlignmentOptions& o, cv::Mat* valid,
+                      cv::Mat* coarse_valid, cv::Mat* highpass) {
+  cv::Mat mask = image > kNoData;
+  if (!seen.empty()) cv::bitwise_and(mask, seen != 0, mask);
+  mask.convertTo(*valid, CV_32F, 1.0 / 255.0);
+  cv::Mat coarse;
+  ToCoarse(image, *valid, o.resolution, &coarse, coarse_valid);
+  *highpass = HighPass(coarse, *coarse_valid, o.highpass_sigma);
 }
 
 }  // namespace
 
-cv::Mat AlignReference(const cv::Mat& reference, const cv::Mat& texture, const cv::Mat& seen,
-                       const ReferenceAlignmentOptions& options, ReferenceAlignmentReport* report) {
-  options.Check();
-  RequireInputs(reference, texture, seen, options.resolution);
-  const FlowInput ref = PrepareFlowInput(reference, cv::Mat(), options);
-  const FlowInput tex = PrepareFlowInput(texture, seen, options);
-  const cv::Mat flow = AlignmentFlow(ref, tex, /*texture_to_reference=*/true, options, report);
-  return flow.empty() ? reference.clone() : Resample(reference, ref.valid, flow);
+ReferenceAligner::ReferenceAligner(const cv::Mat& reference, const ReferenceAlignmentOptions& options)
+    : options_(options), reference_(reference) {
+  options_.Check();
+  RequireReference(reference_, options_.resolution);
+  cv::Mat highpass;
+  PrepareFlowInput(reference_, cv::Mat(), options_, &valid_, &coarse_valid_, &highpass);
+  cv::Scalar mean, stddev;
+  cv::meanStdDev(highpass, mean, stddev, coarse_valid_ != 0.0f);
+  if (!(stddev[0] > 0.0)) return;  // featureless: nothing to align to (reference8_ stays empty)
+  gain_ = 32.0 / stddev[0];        // ±4 standard deviations fill the 8 bits
+  reference8_ = ToFlowImage(highpass, coarse_valid_, gain_);
 }
 
-void AlignTextureToReference(const cv::Mat& reference, const cv::Mat& texture, const cv::Mat& seen,
-                             const ReferenceAlignmentOptions& options, cv::Mat* aligned, cv::Mat* aligned_seen,
-                             ReferenceAlignmentReport* report) {
-  options.Check();
-  RequireInputs(reference, texture, seen, options.resolution);
-  const FlowInput ref = PrepareFlowInput(reference, cv::Mat(), options);
-  const FlowInput tex = PrepareFlowInput(texture, seen, options);
-  const cv::Mat flow = AlignmentFlow(ref, tex, /*texture_to_reference=*/false, options, report);
+// Steps 1–3 for the texture: the flow f with from(x) ≈ to(x + f(x)) (texture to
+// reference, or the other way), or an empty Mat when the reference is featureless;
+// `texture_valid`: the texture's full-grid validity.
+cv::Mat ReferenceAligner::Flow(const cv::Mat& texture, const cv::Mat& seen, bool texture_to_reference,
+                               cv::Mat* texture_valid, ReferenceAlignmentReport* report) const {
+  RequireTexture(reference_, texture, seen);
+  if (reference8_.empty()) {
+    if (report) *report = {};
+    return cv::Mat();
+  }
+  cv::Mat coarse_valid, highpass;
+  PrepareFlowInput(texture, seen, options_, texture_valid, &coarse_valid, &highpass);
+  const cv::Mat texture8 = ToFlowImage(highpass, coarse_valid, gain_);  // the reference's scale
+  const cv::Mat both = coarse_valid_.mul(coarse_valid);
+  return texture_to_reference ? CoarseFlow(texture8, reference8_, both, options_, report)
+                              : CoarseFlow(reference8_, texture8, both, options_, report);
+}
+
+cv::Mat ReferenceAligner::AlignReference(const cv::Mat& texture, const cv::Mat& seen,
+                                         ReferenceAlignmentReport* report) const {
+  cv::Mat texture_valid;
+  const cv::Mat flow = Flow(texture, seen, /*texture_to_reference=*/true, &texture_valid, report);
+  return flow.empty() ? reference_.clone() : Resample(reference_, valid_, flow);
+}
+
+void ReferenceAligner::AlignTexture(const cv::Mat& texture, const cv::Mat& seen, cv::Mat* aligned,
+                                    cv::Mat* aligned_seen, ReferenceAlignmentReport* report) const {
+  cv::Mat texture_valid;
+  const cv::Mat flow = Flow(texture, seen, /*texture_to_reference=*/false, &texture_valid, report);
   if (flow.empty()) {
     *aligned = texture.clone();
     *aligned_seen = seen.empty() ? cv::Mat(texture > kNoData) : seen.clone();
     return;
   }
-  *aligned = Resample(texture, tex.valid, flow);
+  *aligned = Resample(texture, texture_valid, flow);
   *aligned_seen = *aligned > kNoData;
 }
 

@@ -10,7 +10,7 @@
 // millimetres, and by a different amount in every frame, so T^t(u) and the reference(u)
 // show slightly different points of the face: every edge of the person's appearance
 // then comes out of the division as a bright-dark step, which the patch features read
-// as relief. AlignReference removes that relative slide:
+// as relief. ReferenceAligner removes that relative slide:
 //
 //   1. both textures go to a coarse grid (`resolution`², area averaging) and are
 //      high-passed (minus a normalised Gaussian of σ = highpass_sigma over the chart
@@ -24,21 +24,24 @@
 //   4. the reference is resampled at x + f(x) on the full grid (bilinear).
 //
 // The result is the reference as T^t's registration would have shown it; the
-// flattening then divides like by like. AlignTextureToReference goes the other way
+// flattening then divides like by like. ReferenceAligner::AlignTexture goes the other way
 // and resamples T^t onto the reference's registration (ReferenceAlignmentOptions::
 // warp_texture), which also moves D^t there. A slide shared by T^t and the reference (the
 // tracker's constant bias) is not removed, and need not be: the flattened texture only
 // compares the two. All lengths are in texels of the coarse grid.
 //
-// Cost (Release, R = 1024, resolution 256, 2-vCPU AMD EPYC): in the paper-profile
-// captures of experiments/detail-levers.yaml (two captures sharing the 2 cores) the
-// detail regression's median per frame rose from 22.6 to 50.7 ms with warp_texture and
-// from 24.7 to 45.5 ms with the reference warped; not real time, and not optimised
-// (the full-resolution masks, products and two remaps dominate, with their page faults;
-// bench/detail_regression_bench.cc BM_AlignReference, 126–188 ms per call there on its
-// synthetic maps, where the allocator keeps no blocks). An option for research, off by
-// default: on the paper profile it did not raise D^t's correlation (README,
-// "The reference alignment").
+// Cost (Release, R = 1024, resolution 256, 2-vCPU AMD EPYC). Alone on the machine, the
+// first 90 frames of a paper-profile `detail-levers` capture (the levers' model): the
+// detail regression's median per frame is 20.6 ms without the alignment and 32.2 ms
+// with the reference aligned (34.6 ms before the reference was prepared once, in
+// ReferenceAligner's constructor). In the experiment's runs, two captures sharing the
+// 2 cores, 22.6 → 50.7 ms with warp_texture and 24.7 → 45.5 ms with the reference
+// aligned. Not real time, not optimised: the full-resolution masks, products and two
+// remaps with their page faults. bench/detail_regression_bench.cc BM_AlignReference
+// gives 103–127 ms per call on its synthetic maps, far above the capture's figure,
+// for a reason not found (its samples fall mostly in OpenCV's worker threads). An
+// option for research, off by default: on the paper profile it did not raise D^t's
+// correlation (README, "The reference alignment").
 #pragma once
 
 #include <opencv2/core/mat.hpp>
@@ -59,9 +62,9 @@ struct ReferenceAlignmentOptions {
   double smoothing_sigma = 4.0;
   // Largest shift kept, coarse texels (longer flow vectors are scaled down to it).
   double max_shift = 8.0;
-  // false: the reference is warped onto T^t (AlignReference); T^t, and so D^t, stay
-  // in the tracker's registration. true: T^t is warped onto the reference
-  // (AlignTextureToReference), so D^t lands where the most neutral frames put the
+  // false: the reference is warped onto T^t (ReferenceAligner::AlignReference); T^t,
+  // and so D^t, stay in the tracker's registration. true: T^t is warped onto the
+  // reference (ReferenceAligner::AlignTexture), so D^t lands where the most neutral frames put the
   // face: the tracker's expression-dependent slide is removed from D^t too.
   bool warp_texture = false;
 
@@ -74,20 +77,35 @@ struct ReferenceAlignmentReport {
   double max_shift = 0.0;   // largest |f| after smoothing and clamping, coarse texels
 };
 
-// The reference resampled onto `texture`'s registration (steps above). reference,
-// texture: CV_32FC1 R×R linear gray (0 = no data); seen: CV_8UC1 R×R, non-zero where
-// `texture` holds data (empty = wherever texture > 0). Texels of the result whose
-// source falls where the reference has no data are 0. Throws Error on wrong types or
-// sizes, or R not a multiple of options.resolution. report may be null.
-cv::Mat AlignReference(const cv::Mat& reference, const cv::Mat& texture, const cv::Mat& seen,
-                       const ReferenceAlignmentOptions& options, ReferenceAlignmentReport* report = nullptr);
+// The reference, prepared once (step 1 and its 8-bit scale), aligned against each
+// texture. reference, texture: CV_32FC1 R×R linear gray (0 = no data); seen: CV_8UC1
+// R×R, non-zero where `texture` holds data (empty = wherever texture > 0). Throws Error
+// on wrong types or sizes, failed options, or R not a multiple of options.resolution.
+// A featureless reference aligns nothing. report may be null.
+class ReferenceAligner {
+ public:
+  ReferenceAligner(const cv::Mat& reference, const ReferenceAlignmentOptions& options);
 
-// The other direction: `texture` resampled onto the reference's registration (the flow
-// of steps 2–3 from the reference to the texture, step 4 on the texture), and its seen
-// mask (CV_8UC1, 255 where the result holds data). Same inputs and errors as
-// AlignReference; a featureless reference returns texture and seen unchanged.
-void AlignTextureToReference(const cv::Mat& reference, const cv::Mat& texture, const cv::Mat& seen,
-                             const ReferenceAlignmentOptions& options, cv::Mat* aligned, cv::Mat* aligned_seen,
-                             ReferenceAlignmentReport* report = nullptr);
+  // The reference resampled onto `texture`'s registration (steps above). Texels whose
+  // source falls where the reference has no data are 0.
+  cv::Mat AlignReference(const cv::Mat& texture, const cv::Mat& seen,
+                         ReferenceAlignmentReport* report = nullptr) const;
+  // The other direction: `texture` resampled onto the reference's registration (the
+  // flow of steps 2–3 from the reference to the texture, step 4 on the texture), and
+  // its seen mask (CV_8UC1, 255 where the result holds data).
+  void AlignTexture(const cv::Mat& texture, const cv::Mat& seen, cv::Mat* aligned, cv::Mat* aligned_seen,
+                    ReferenceAlignmentReport* report = nullptr) const;
+
+ private:
+  cv::Mat Flow(const cv::Mat& texture, const cv::Mat& seen, bool texture_to_reference, cv::Mat* texture_valid,
+               ReferenceAlignmentReport* report) const;
+
+  ReferenceAlignmentOptions options_;
+  cv::Mat reference_;
+  cv::Mat valid_;         // CV_32F R×R, 1 where the reference holds data
+  cv::Mat coarse_valid_;  // the same on the coarse grid
+  cv::Mat reference8_;    // its high-pass as DIS reads it; empty when featureless
+  double gain_ = 0.0;     // the 8-bit scale, shared by the textures
+};
 
 }  // namespace crease
