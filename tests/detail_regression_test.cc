@@ -298,6 +298,48 @@ TEST(DetailRegression, AReferenceTextureCancelsStaticFeaturesButKeepsWrinkles) {
   EXPECT_GT(Correlation(flat.Regress(t, cv::Mat()), truth, Chart()), 0.5);
 }
 
+// The same lines on a skin five times darker (albedo × 0.2: the lines' shading scales
+// with it). Flattened to the reference's own mean (the default) the absolute α finds
+// fewer of them; flattened to a fixed gray level (texture_reference_level) the darker
+// skin gives the same wrinkle map and layout, patch for patch.
+TEST(DetailRegression, AFixedReferenceLevelMakesTheLayoutIndependentOfTheSkinTone) {
+  auto layout = [](double level, float albedo) {
+    DetailModel model = TinyModel();
+    model.wrinkle.texture_reference = TextureReference::kRatio;
+    model.wrinkle.texture_reference_level = level;
+    DetailRegressionOptions o = SmallOptions();
+    o.wrinkle_frames = 5;
+    DetailRegressor r(model, {}, Chart(), o);
+    for (double depth : {0.2, 0.15, 0.0, 0.18, 0.1}) {
+      cv::Mat t, d;
+      Frame(depth, &t, &d);
+      r.AddWrinkleFrame(t * albedo, cv::Mat(), depth);
+    }
+    r.FixLayout();
+    return r.layout();
+  };
+  const PatchLayout own_bright = layout(0.0, 1.0f), own_dark = layout(0.0, 0.2f);
+  ASSERT_GT(own_bright.num_patches(), 3);
+  EXPECT_LT(own_dark.num_patches(), own_bright.num_patches() / 2);
+  const PatchLayout fixed_bright = layout(0.5, 1.0f), fixed_dark = layout(0.5, 0.2f);
+  ASSERT_EQ(fixed_dark.num_patches(), fixed_bright.num_patches());
+  EXPECT_EQ(fixed_bright.num_patches(), own_bright.num_patches());  // the bright skin's mean is 0.5
+  for (int k = 0; k < fixed_bright.num_patches(); ++k) {
+    EXPECT_NEAR(fixed_dark.patches[k].center_texel.x(), fixed_bright.patches[k].center_texel.x(), 1e-3f);
+    EXPECT_NEAR(fixed_dark.patches[k].center_texel.y(), fixed_bright.patches[k].center_texel.y(), 1e-3f);
+  }
+}
+
+TEST(DetailRegression, AReferenceLevelWithoutAReferenceIsRefused) {
+  WrinkleMapOptions o;
+  o.texture_reference_level = 0.5;
+  EXPECT_THROW(o.Check(), Error);
+  o.texture_reference = TextureReference::kDifference;
+  EXPECT_NO_THROW(o.Check());
+  o.texture_reference_level = -1.0;
+  EXPECT_THROW(o.Check(), Error);
+}
+
 // The tracker slides the texture over the face by a few texels in an expression: with
 // reference_alignment.warp_texture, T^t is resampled onto the most neutral frames'
 // registration, and D^t lands where the lines are in that registration.

@@ -145,7 +145,8 @@ struct DetailRegressor::Impl {
       seen.push_back(held_seen[k]);
     }
     reference = MedianTexture(gray, seen);
-    reference_mean = ReferenceMean(reference, coverage);
+    const double level = model.wrinkle.texture_reference_level;
+    reference_mean = level > 0 ? level : ReferenceMean(reference, coverage);
     if (options.reference_alignment.enabled) aligner.emplace(reference, options.reference_alignment);
   }
 

@@ -28,6 +28,7 @@ void WrinkleMapOptions::VisitFields(OptionVisitor& v) {
   v.Field("orientation_gradient_sigma", orientation_gradient_sigma);
   v.Field("orientation_smoothing_sigma", orientation_smoothing_sigma);
   v.Field("texture_reference", texture_reference);
+  v.Field("texture_reference_level", texture_reference_level);
 }
 
 void WrinkleMapOptions::Check() const {
@@ -43,6 +44,11 @@ void WrinkleMapOptions::Check() const {
   CheckGe(o, "patch_exclude_margin", patch_exclude_margin, 0.0);
   CheckLe(o, "patch_exclude_margin", patch_exclude_margin, 1000.0);
   CheckLe(o, "orientation_smoothing_sigma", orientation_smoothing_sigma, 1000.0);
+  CheckGe(o, "texture_reference_level", texture_reference_level, 0.0);
+  Require(texture_reference_level == 0.0 || texture_reference != TextureReference::kNone,
+          fmt::format("{}: texture_reference_level = {} needs texture_reference ratio or difference (it sets the "
+                      "flattening's gray level)",
+                      o, texture_reference_level));
   for (size_t k = 0; k < patch_regions.size(); ++k) {
     Require(!patch_regions[k].empty(),
             fmt::format("WrinkleMapOptions.patch_regions[{}] is empty; expected a region name", k));

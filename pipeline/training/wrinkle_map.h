@@ -59,6 +59,15 @@
 //      studio's scans the raw map puts most patches on the hair edge, the brows
 //      and the lids (their texture patches are dark hair edges, their displacement
 //      patches unrelated to them); flattened, the patches sit on the lines.
+//      With texture_reference_level > 0 a fixed gray level replaces mean(T_ref),
+//      so the flattened texture no longer carries the person's skin tone and the
+//      absolute threshold α means the same shading contrast on every skin.
+//      Measured (crease 0.4.10, detail-levers' workout-level against workout: the
+//      ratio, α 0.002, G 1 mm, N = 120; level 0.2; paper profile, 3 seeds): the
+//      training pairs per actor even out (seed 3: 105–440 → 460–651), the
+//      dark-skinned novel actor of seed 2 gets 884 patches instead of 107, D^t vs D*
+//      at R2 0.165 → 0.204 (every seed gains), still face 0.90 → 0.85; at R3
+//      0.064 → 0.068, still face 0.911 → 0.894.
 //      Reference: the actor's neutral scan in training; in capture the per-texel
 //      median of the quarter of the N wrinkle frames whose tracked expression is
 //      closest to the neutral (the user's resting appearance).
@@ -136,6 +145,14 @@ struct WrinkleMapOptions {
   // in training and, in capture, the per-texel median of the wrinkle frames closest
   // to the neutral (MedianTexture).
   TextureReference texture_reference = TextureReference::kNone;
+  // m of the flattening (Difference 6): 0 = the reference's own mean gray level
+  // mean(T_ref), so the flattened texture keeps the person's brightness and the
+  // absolute α selects fewer wrinkles on a darker skin; > 0 = this gray level for
+  // every person, T · m / T_ref, so α applies to the shading alone, whatever the skin
+  // tone (issue 17: on the paper profile a dark-skinned novel actor got 53 patches
+  // against 281–349, and training actors contribute pairs in proportion to their
+  // brightness). Only with texture_reference ratio or difference.
+  double texture_reference_level = 0.0;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
