@@ -145,8 +145,7 @@ struct DetailRegressor::Impl {
       seen.push_back(held_seen[k]);
     }
     reference = MedianTexture(gray, seen);
-    const double level = model.wrinkle.texture_reference_level;
-    reference_mean = level > 0 ? level : ReferenceMean(reference, coverage);
+    reference_mean = FlatteningLevel(model.wrinkle, reference, coverage);
     if (options.reference_alignment.enabled) aligner.emplace(reference, options.reference_alignment);
   }
 

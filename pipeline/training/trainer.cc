@@ -216,11 +216,10 @@ std::string TrainingSummary::ToMarkdown() const {
 
 namespace {
 
-// Difference 6 (WrinkleMapOptions::texture_reference, `mode`): each texture
+// Difference 6 (WrinkleMapOptions::texture_reference): each texture
 // flattened by the neutral scan's texture under the same light (the first texture
-// of each light: the neutral scan comes first), to the gray level `level` (> 0) or
-// to the neutral's own mean (0).
-void FlattenByNeutral(TextureReference mode, double level, const std::vector<std::string>& lights,
+// of each light: the neutral scan comes first), to FlatteningLevel.
+void FlattenByNeutral(const WrinkleMapOptions& options, const std::vector<std::string>& lights,
                       const std::vector<cv::Mat>& coverage, std::vector<cv::Mat>* textures) {
   std::map<std::string, size_t> neutral;
   for (size_t t = 0; t < textures->size(); ++t) neutral.emplace(lights[t], t);
@@ -229,7 +228,9 @@ void FlattenByNeutral(TextureReference mode, double level, const std::vector<std
   for (size_t t = 0; t < textures->size(); ++t) {
     cv::Mat seen;
     cv::bitwise_and(coverage[t], coverage[neutral[lights[t]]], seen);
-    (*textures)[t] = FlattenByReference((*textures)[t], reference[lights[t]], seen, mode, level > 0 ? level : -1.0);
+    const cv::Mat& ref = reference[lights[t]];
+    (*textures)[t] =
+        FlattenByReference((*textures)[t], ref, seen, options.texture_reference, FlatteningLevel(options, ref, seen));
   }
 }
 
@@ -437,8 +438,7 @@ TrainingPatches ActorPatchPairs(const ExtractionContext& ctx, const std::string&
   const TrainingOptions& options = ctx.options;
   const auto t0 = Clock::now();
   if (options.wrinkle.texture_reference != TextureReference::kNone)
-    FlattenByNeutral(options.wrinkle.texture_reference, options.wrinkle.texture_reference_level, textures->light,
-                     textures->coverage, &textures->gray);
+    FlattenByNeutral(options.wrinkle, textures->light, textures->coverage, &textures->gray);
   cv::Mat coverage = detail_coverage.clone();
   for (const auto& c : textures->coverage) cv::bitwise_and(coverage, c, coverage);
   WrinkleMapBuilder builder(options.detail.map_resolution, coverage, ctx.rig.regions, options.wrinkle);

@@ -248,6 +248,10 @@ cv::Mat FlattenByReference(const cv::Mat& texture, const cv::Mat& reference, con
   return out;
 }
 
+double FlatteningLevel(const WrinkleMapOptions& options, const cv::Mat& reference, const cv::Mat& coverage) {
+  return options.texture_reference_level > 0 ? options.texture_reference_level : ReferenceMean(reference, coverage);
+}
+
 double ReferenceMean(const cv::Mat& reference, const cv::Mat& coverage) {
   RequireGray(reference, "ReferenceMean reference");
   cv::Mat usable = reference > 1e-4f;

@@ -168,6 +168,9 @@ cv::Mat FlattenByReference(const cv::Mat& texture, const cv::Mat& reference, con
 // m of FlattenByReference: the mean of `reference` over its texels above 1e-4 within
 // `coverage` (empty = all); 0 when there are none.
 double ReferenceMean(const cv::Mat& reference, const cv::Mat& coverage);
+// m of FlattenByReference under `options`: texture_reference_level when it is > 0,
+// else ReferenceMean(reference, coverage) (the person's own brightness).
+double FlatteningLevel(const WrinkleMapOptions& options, const cv::Mat& reference, const cv::Mat& coverage);
 // The per-texel median of `textures` over the frames that saw the texel (`seen`:
 // CV_8U masks, one per texture, or empty = all seen); 0 where none did.
 cv::Mat MedianTexture(const std::vector<cv::Mat>& textures, const std::vector<cv::Mat>& seen);
