@@ -81,16 +81,7 @@ void WriteFrameTruth(const fs::path& truth_dir, const std::string& name, const S
 
 Eigen::VectorXd ParseExpressionSpec(const std::string& spec, const FaceRig& rig) {
   SequenceFrame f;
-  size_t start = 0;
-  while (start < spec.size()) {
-    size_t end = spec.find(',', start);
-    if (end == std::string::npos) end = spec.size();
-    const std::string item = spec.substr(start, end - start);
-    start = end + 1;
-    if (item.empty()) continue;
-    const auto [name, w] = ParseNameValue(item, "expression", "WEIGHT");
-    f.expression[name] = w;
-  }
+  f.expression = ParseExpressionWeights(spec);
   const std::vector<double> w = ExpressionWeightsForRig(f, rig);
   return Eigen::Map<const Eigen::VectorXd>(w.data(), static_cast<Eigen::Index>(w.size()));
 }

@@ -89,9 +89,9 @@ struct ScanSetOptions {
   int cameras = 3;                   // on an arc in front of the face
   double camera_arc_deg = 50.0;      // total horizontal spread of the cameras
   std::vector<std::string> light_rigs = {"studio"};  // each scan is imaged under every rig
-  // Expressions per scan: "name=w,name=w"; the defaults show the main wrinkles.
-  std::vector<std::string> expressions = {"browInnerUp=1,browOuterUp=1", "browDown=1",
-                                          "mouthSmile=1,cheekSquint=0.8,eyeSquint=0.7", "noseSneer=1"};
+  // Expressions per scan: "name=w,name=w"; the defaults show the main wrinkles
+  // (the sequence preset scan-holds holds the same ones).
+  std::vector<std::string> expressions = ScanExpressionSpecs();
   // Actor a of n draws its age from the a-th of n equal parts of [age_min, age_max]
   // (ActorOptions), so a set spans unlined to deeply lined faces as the paper's
   // several actors do, instead of leaving it to chance (the quickstart's seeds drew

@@ -9,6 +9,7 @@
 #include "core/error.h"
 #include "core/face_rig.h"
 #include "core/file_util.h"
+#include "core/options.h"
 #include "core/rng.h"
 
 namespace crease {
@@ -132,9 +133,11 @@ void Sequence::Validate(const std::string& what) const {
 
 namespace {
 
+using ChannelValues = std::vector<std::pair<std::string, double>>;
+
 struct PresetBuilder {
   Sequence s;
-  void Key(double t, std::initializer_list<std::pair<const char*, double>> values) {
+  void Key(double t, const ChannelValues& values) {
     auto it = std::find_if(s.keys.begin(), s.keys.end(), [&](const Keyframe& k) { return std::abs(k.t - t) < 1e-9; });
     if (it == s.keys.end()) {
       s.keys.push_back({t, {}});
@@ -152,8 +155,7 @@ struct PresetBuilder {
 
 // A hold of `values` ramping up over `ramp` s to start at t0, held until t1,
 // released by t1 + ramp; channels listed are keyed to 0 around it.
-void Pulse(PresetBuilder& b, double t0, double t1, double ramp,
-           std::initializer_list<std::pair<const char*, double>> values) {
+void Pulse(PresetBuilder& b, double t0, double t1, double ramp, const ChannelValues& values) {
   for (const auto& [c, v] : values) {
     b.Key(t0 - ramp, {{c, 0.0}});
     b.Key(t0, {{c, v}});
@@ -162,10 +164,61 @@ void Pulse(PresetBuilder& b, double t0, double t1, double ramp,
   }
 }
 
+// scan-holds' timing, seconds at its own length: neutral until kLead, then per
+// scan expression a ramp up, a hold, a ramp down and a neutral gap.
+struct ScanHoldTiming {
+  static constexpr double kLead = 0.6, kRamp = 0.3, kHold = 1.0, kGap = 0.4;
+  static constexpr double kPeriod = 2 * kRamp + kHold + kGap;
+  static double Start(int i) { return kLead + kRamp + i * kPeriod; }  // first instant at full weight
+  static double Length(int n) { return kLead + n * kPeriod; }
+};
+
+Sequence ScanHolds(PresetBuilder& b, double seconds) {
+  const int n = static_cast<int>(ScanExpressionSpecs().size());
+  const double k = seconds > 0 ? seconds / ScanHoldTiming::Length(n) : 1.0;
+  for (int i = 0; i < n; ++i) {
+    ChannelValues values;
+    for (const auto& [name, w] : ParseExpressionWeights(ScanExpressionSpecs()[i])) {
+      values.emplace_back("expression:" + name, w);
+    }
+    const double t0 = ScanHoldTiming::Start(i) * k;
+    Pulse(b, t0, t0 + ScanHoldTiming::kHold * k, ScanHoldTiming::kRamp * k, values);
+  }
+  b.Key(0, {{"pose:yaw_deg", 0}, {"pose:pitch_deg", 0}});
+  return b.Done(ScanHoldTiming::Length(n) * k);
+}
+
 }  // namespace
 
 std::vector<std::string> SequencePresetNames() {
-  return {"wrinkle-workout", "talking", "moving-light", "fast-motion", "occlusion", "workout-talking"};
+  return {"wrinkle-workout", "talking", "moving-light", "fast-motion", "occlusion", "workout-talking", "scan-holds"};
+}
+
+const std::vector<std::string>& ScanExpressionSpecs() {
+  static const std::vector<std::string> specs = {"browInnerUp=1,browOuterUp=1", "browDown=1",
+                                                 "mouthSmile=1,cheekSquint=0.8,eyeSquint=0.7", "noseSneer=1"};
+  return specs;
+}
+
+std::map<std::string, double> ParseExpressionWeights(const std::string& spec) {
+  std::map<std::string, double> weights;
+  size_t start = 0;
+  while (start < spec.size()) {
+    size_t end = spec.find(',', start);
+    if (end == std::string::npos) end = spec.size();
+    const std::string item = spec.substr(start, end - start);
+    start = end + 1;
+    if (item.empty()) continue;
+    const auto [name, w] = ParseNameValue(item, "expression", "WEIGHT");
+    weights[name] = w;
+  }
+  return weights;
+}
+
+std::pair<int, int> ScanHoldFrames(int index, double fps, double seconds) {
+  const double k = seconds > 0 ? seconds / ScanHoldTiming::Length(static_cast<int>(ScanExpressionSpecs().size())) : 1.0;
+  const double t0 = ScanHoldTiming::Start(index) * k, t1 = t0 + ScanHoldTiming::kHold * k;
+  return {static_cast<int>(std::ceil(t0 * fps - 1e-9)), static_cast<int>(std::floor(t1 * fps + 1e-9))};
 }
 
 Sequence MakePresetSequence(const std::string& preset, double seconds) {
@@ -234,6 +287,7 @@ Sequence MakePresetSequence(const std::string& preset, double seconds) {
     }
     return b.Done(w.duration_s + gap + t.duration_s);
   }
+  if (preset == "scan-holds") return ScanHolds(b, seconds);
   if (preset == "moving-light") {
     // Fig. 14: the expression holds while a directional light moves from the front to above.
     const double d = seconds > 0 ? seconds : 4.0;

@@ -8,6 +8,11 @@
 //                    a brow raise holds (the paper's Fig. 14)
 //   fast-motion      fast head turns (for motion blur)
 //   occlusion        an occluder passes in front of the face
+//   workout-talking  a short wrinkle workout, then talking (the experiments' default)
+//   scan-holds       the scan set's expressions (ScanExpressionSpecs) one after
+//                    another, each held still for 1 s with the head still: the
+//                    capture's detail per expression, on the very expressions the
+//                    regressor's training scans show (issue 17's ladder)
 // and user sequences from YAML:
 //
 //   name: my-sequence
@@ -77,6 +82,17 @@ class Sequence {
 
 // Built-in presets; `seconds` scales their length (≤ 0: the preset's own length).
 std::vector<std::string> SequencePresetNames();
+// The expressions of a studio scan set by default (ScanSetOptions, synth/dataset.h)
+// as "name=w,name=w": they show the main wrinkles (forehead, glabella, crow's feet
+// and cheeks, nose).
+const std::vector<std::string>& ScanExpressionSpecs();
+// "name=w,name=w" → weights by name (as SequenceFrame::expression); errors name
+// the item that is not NAME=WEIGHT.
+std::map<std::string, double> ParseExpressionWeights(const std::string& spec);
+// scan-holds' hold of scan expression `index` (of ScanExpressionSpecs): its first
+// and last frame at full weight, at `fps`, for the preset made with `seconds`
+// (≤ 0: its own length, 8.6 s).
+std::pair<int, int> ScanHoldFrames(int index, double fps = 30.0, double seconds = 0.0);
 Sequence MakePresetSequence(const std::string& preset, double seconds = 0.0);
 
 // YAML (see above). Errors name the file, the key index and the field.

@@ -58,6 +58,33 @@ TEST(Sequence, PresetsAreValidAndDoWhatTheySay) {
   EXPECT_EQ(brow, 1.0);
   EXPECT_EQ(jaw_early, 0.0);
   EXPECT_GT(jaw_late, 0.05);
+  // scan-holds: each scan expression at exactly its scan weights over its hold,
+  // nothing else on, the head still; neutral before the first and between holds.
+  const Sequence h = MakePresetSequence("scan-holds");
+  EXPECT_EQ(h.Frame(0).expression.at("browInnerUp"), 0.0);
+  for (size_t i = 0; i < ScanExpressionSpecs().size(); ++i) {
+    const auto weights = ParseExpressionWeights(ScanExpressionSpecs()[i]);
+    const auto [first, last] = ScanHoldFrames(static_cast<int>(i));
+    EXPECT_GE(last - first, 29) << i;  // 1 s at 30 fps
+    for (int t : {first, (first + last) / 2, last}) {
+      const SequenceFrame f = h.Frame(t);
+      EXPECT_EQ(f.yaw_deg, 0.0);
+      for (const auto& [name, v] : f.expression) {
+        EXPECT_NEAR(v, weights.count(name) ? weights.at(name) : 0.0, 1e-12) << "hold " << i << " frame " << t << " " << name;
+      }
+    }
+    for (const auto& [name, v] : h.Frame(last + 15).expression) EXPECT_NEAR(v, 0.0, 1e-12) << "after hold " << i;
+    EXPECT_LT(h.Frame(first - 3).expression.at(weights.begin()->first), weights.begin()->second) << "ramp " << i;
+  }
+  // Scaled to 4.3 s (half its length): the holds keep their place, scaled.
+  const Sequence h2 = MakePresetSequence("scan-holds", 4.3);
+  EXPECT_EQ(h2.num_frames(), 130);
+  const auto [first2, last2] = ScanHoldFrames(2, 30.0, 4.3);
+  EXPECT_EQ(first2, (ScanHoldFrames(2).first + 1) / 2);
+  EXPECT_EQ(h2.Frame(last2).expression.at("mouthSmile"), 1.0);
+  EXPECT_LT(h2.Frame(last2 + 3).expression.at("mouthSmile"), 1.0);
+  EXPECT_EQ(ParseExpressionWeights("browDown=1,,mouthSmile=0.5").at("mouthSmile"), 0.5);
+  EXPECT_NE(ErrorOf([] { ParseExpressionWeights("browDown"); }).find("browDown"), std::string::npos);
   // Same preset, same values: presets are deterministic.
   EXPECT_EQ(MakePresetSequence("talking").Frame(37).expression, MakePresetSequence("talking").Frame(37).expression);
   EXPECT_NE(ErrorOf([] { MakePresetSequence("dancing"); }).find("unknown sequence preset 'dancing'"),
