@@ -169,13 +169,16 @@ void Pulse(PresetBuilder& b, double t0, double t1, double ramp, const ChannelVal
 struct ScanHoldTiming {
   static constexpr double kLead = 0.6, kRamp = 0.3, kHold = 1.0, kGap = 0.4;
   static constexpr double kPeriod = 2 * kRamp + kHold + kGap;
+  static int Count() { return static_cast<int>(ScanExpressionSpecs().size()); }
   static double Start(int i) { return kLead + kRamp + i * kPeriod; }  // first instant at full weight
-  static double Length(int n) { return kLead + n * kPeriod; }
+  static double Length() { return kLead + Count() * kPeriod; }
+  // The factor of every time for the preset made `seconds` long (≤ 0: its own length).
+  static double Scale(double seconds) { return seconds > 0 ? seconds / Length() : 1.0; }
 };
 
 Sequence ScanHolds(PresetBuilder& b, double seconds) {
-  const int n = static_cast<int>(ScanExpressionSpecs().size());
-  const double k = seconds > 0 ? seconds / ScanHoldTiming::Length(n) : 1.0;
+  const int n = ScanHoldTiming::Count();
+  const double k = ScanHoldTiming::Scale(seconds);
   for (int i = 0; i < n; ++i) {
     ChannelValues values;
     for (const auto& [name, w] : ParseExpressionWeights(ScanExpressionSpecs()[i])) {
@@ -185,7 +188,7 @@ Sequence ScanHolds(PresetBuilder& b, double seconds) {
     Pulse(b, t0, t0 + ScanHoldTiming::kHold * k, ScanHoldTiming::kRamp * k, values);
   }
   b.Key(0, {{"pose:yaw_deg", 0}, {"pose:pitch_deg", 0}});
-  return b.Done(ScanHoldTiming::Length(n) * k);
+  return b.Done(ScanHoldTiming::Length() * k);
 }
 
 }  // namespace
@@ -216,7 +219,10 @@ std::map<std::string, double> ParseExpressionWeights(const std::string& spec) {
 }
 
 std::pair<int, int> ScanHoldFrames(int index, double fps, double seconds) {
-  const double k = seconds > 0 ? seconds / ScanHoldTiming::Length(static_cast<int>(ScanExpressionSpecs().size())) : 1.0;
+  Require(index >= 0 && index < ScanHoldTiming::Count(),
+          fmt::format("scan-holds: hold {} is out of range (it has {})", index, ScanHoldTiming::Count()));
+  Require(std::isfinite(fps) && fps > 0, fmt::format("scan-holds: fps = {} must be > 0", fps));
+  const double k = ScanHoldTiming::Scale(seconds);
   const double t0 = ScanHoldTiming::Start(index) * k, t1 = t0 + ScanHoldTiming::kHold * k;
   return {static_cast<int>(std::ceil(t0 * fps - 1e-9)), static_cast<int>(std::floor(t1 * fps + 1e-9))};
 }

@@ -91,7 +91,7 @@ const std::vector<std::string>& ScanExpressionSpecs();
 std::map<std::string, double> ParseExpressionWeights(const std::string& spec);
 // scan-holds' hold of scan expression `index` (of ScanExpressionSpecs): its first
 // and last frame at full weight, at `fps`, for the preset made with `seconds`
-// (≤ 0: its own length, 8.6 s).
+// (≤ 0: its own length, 8.6 s). Throws Error for an index out of range or fps ≤ 0.
 std::pair<int, int> ScanHoldFrames(int index, double fps = 30.0, double seconds = 0.0);
 Sequence MakePresetSequence(const std::string& preset, double seconds = 0.0);
 

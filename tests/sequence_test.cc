@@ -83,6 +83,7 @@ TEST(Sequence, PresetsAreValidAndDoWhatTheySay) {
   EXPECT_EQ(first2, (ScanHoldFrames(2).first + 1) / 2);
   EXPECT_EQ(h2.Frame(last2).expression.at("mouthSmile"), 1.0);
   EXPECT_LT(h2.Frame(last2 + 3).expression.at("mouthSmile"), 1.0);
+  EXPECT_NE(ErrorOf([] { ScanHoldFrames(4); }).find("hold 4 is out of range (it has 4)"), std::string::npos);
   EXPECT_EQ(ParseExpressionWeights("browDown=1,,mouthSmile=0.5").at("mouthSmile"), 0.5);
   EXPECT_NE(ErrorOf([] { ParseExpressionWeights("browDown"); }).find("browDown"), std::string::npos);
   // Same preset, same values: presets are deterministic.
