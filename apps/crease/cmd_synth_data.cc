@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "apps/crease/commands.h"
 #include "core/error.h"
@@ -172,9 +173,8 @@ void AddSequenceCommand(CLI::App* synth) {
   cmd->add_option("--rig", a->rig_path, "Rig (.crig)")->required();
   cmd->add_option("--actor", a->actor_file, "Actor definition (.json)");
   cmd->add_option("--actor-seed", a->actor_seed, "Actor seed when no --actor is given")->capture_default_str();
-  std::string presets;
-  for (const auto& n : SequencePresetNames()) presets += (presets.empty() ? "" : ", ") + n;
-  auto* p = cmd->add_option("--preset", a->preset, "Built-in sequence (synth/sequence.h): " + presets);
+  auto* p = cmd->add_option("--preset", a->preset,
+                            fmt::format("Built-in sequence (synth/sequence.h): {}", fmt::join(SequencePresetNames(), ", ")));
   auto* s = cmd->add_option("--script", a->script, "Sequence YAML (see synth/sequence.h)");
   p->excludes(s);
   cmd->add_option("--seconds", a->seconds, "Preset length in seconds (default: the preset's own)");
