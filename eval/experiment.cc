@@ -68,6 +68,7 @@ void ExperimentDataset::VisitFields(OptionVisitor& v) {
   v.Field("leave_one_actor_out", leave_one_actor_out);
   v.Field("loao_regressors", loao_regressors);
   v.Field("patch_sites", patch_sites);
+  v.Field("truth_detail", truth_detail);
 }
 
 void ExperimentDataset::Check() const {
@@ -726,13 +727,11 @@ ExperimentStage PlanSequenceStages(RunPlan& p, const ExperimentStage& rig, int i
       });
 }
 
-// Rung R1 (patch_sites: truth): the wrinkle map from the true detail of the
-// wrinkle frames; returns its key and folder.
+// The true detail D* of the sequence's first `frames` frames (−1: all) with the
+// model's G (rung R1: of the wrinkle frames; R2-oracle: of all); returns its key and
+// folder.
 std::pair<std::string, fs::path> PlanTruthMapsStage(RunPlan& p, const ExperimentStage& model,
-                                                    const ExperimentStage& sequence) {
-  CaptureOptions capture_options;
-  SetOptionsFromJson(SectionOf(p.c, "capture").dump(), "capture", &capture_options);
-  const int frames = capture_options.detail.wrinkle_frames;
+                                                    const ExperimentStage& sequence, int frames) {
   const ExperimentStage& maps =
       p.Add("truth-maps", {{"frames", frames}}, {model.key, sequence.key}, [&](const fs::path& dir) {
         return std::vector<std::string>{"truth-maps", "-d", (sequence.dir / "dataset").string(), "-m",
@@ -752,9 +751,17 @@ void PlanCaptureStages(RunPlan& p, const ExperimentStage& model, const Experimen
   if (!tracker.first.empty()) capture_depends.push_back(tracker.first);
   fs::path truth_maps;  // rung R1: the wrinkle map from the true detail of the wrinkle frames
   if (d.patch_sites == PatchSites::kTruth) {
-    const auto [maps_key, maps_dir] = PlanTruthMapsStage(p, model, sequence);
+    CaptureOptions capture_options;
+    SetOptionsFromJson(SectionOf(c, "capture").dump(), "capture", &capture_options);
+    const auto [maps_key, maps_dir] = PlanTruthMapsStage(p, model, sequence, capture_options.detail.wrinkle_frames);
     capture_depends.push_back(maps_key);
     truth_maps = maps_dir;
+  }
+  fs::path truth_detail;  // rung R2-oracle: D^t assembled from every frame's true detail
+  if (d.truth_detail) {
+    const auto [maps_key, maps_dir] = PlanTruthMapsStage(p, model, sequence, -1);
+    capture_depends.push_back(maps_key);
+    truth_detail = maps_dir;
   }
   json capture_inputs = {{"capture", KeySectionOf(c, "capture")},
                          {"landmarks", ToString(d.landmarks)},
@@ -762,6 +769,7 @@ void PlanCaptureStages(RunPlan& p, const ExperimentStage& model, const Experimen
                          {"mesh_every", d.mesh_every}};
   if (d.exclusive_capture) capture_inputs["exclusive"] = true;  // its timings were taken alone
   if (d.patch_sites != PatchSites::kOwn) capture_inputs["patch_sites"] = ToString(d.patch_sites);
+  if (d.truth_detail) capture_inputs["truth_detail"] = true;
   p.Add(
       "capture", capture_inputs,
       capture_depends, [&](const fs::path& dir) {
@@ -785,6 +793,7 @@ void PlanCaptureStages(RunPlan& p, const ExperimentStage& model, const Experimen
         }
         AppendSets(SectionOf(c, "capture"), &a);
         if (!truth_maps.empty()) a.insert(a.end(), {"--set", "wrinkle_map_from_maps=" + truth_maps.string()});
+        if (!truth_detail.empty()) a.insert(a.end(), {"--set", "detail_from_truth_maps=" + truth_detail.string()});
         a.insert(a.end(), {"--overwrite", "-o", (dir / "capture").string()});
         return a;
       });

@@ -96,6 +96,10 @@ struct ExperimentDataset {
   // frames) or "truth" (rung R1: from the true detail D* of those frames, a
   // `truth-maps` stage; studio sequences only).
   PatchSites patch_sites = PatchSites::kOwn;
+  // Rung R2-oracle (issue 17): D^t assembled from every frame's true D* on the
+  // capture's own patches instead of regressed (capture detail_from_truth_maps, after
+  // a `truth-maps` stage of all frames): what a perfect regressor would give.
+  bool truth_detail = false;
   void VisitFields(OptionVisitor& v);
   void Check() const;
 };

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <numbers>
 
 #include <opencv2/imgproc.hpp>
@@ -192,6 +193,48 @@ TEST(DetailRegression, UnseenPatchesAreDroppedAndLeaveNoGroove) {
   EXPECT_GT(lo, -0.02);  // no groove where nothing was seen (the fill only)
   // The seen lines keep their grooves.
   EXPECT_GT(Correlation(D, truth, Chart() & (seen != 0)), 0.5);
+}
+
+// Rung R2-oracle: the truth's own patches, projected onto the PCA and merged as the
+// regressed ones are, match the truth better than the regression does; the drops
+// apply to them as to the regression (an occluded line leaves no groove), and the
+// oracle is built from the truth map, not from the texture.
+TEST(DetailRegression, TheTruthsOwnPatchesBoundTheRegression) {
+  const DetailRegressor r = FixedRegressor();
+  cv::Mat t, truth;
+  Frame(0.18, &t, &truth);
+  const cv::Mat chart = Chart();
+  const double regressed = Correlation(r.Regress(t, cv::Mat()), truth, chart);
+  DetailTiming timing;
+  const cv::Mat oracle = r.AssembleFromTruth(t, cv::Mat(), truth, &timing);
+  const double assembled = Correlation(oracle, truth, chart);
+  std::printf("over the chart: regressed %.3f, the truth's own patches %.3f\n", regressed, assembled);
+  EXPECT_GT(assembled, 0.9);
+  EXPECT_GE(assembled, regressed);
+  EXPECT_EQ(timing.patches, r.layout().num_patches());
+  // The grooves follow the truth map: half as deep for half the truth.
+  const cv::Mat half = r.AssembleFromTruth(t, cv::Mat(), 0.5 * truth);
+  double lo_full, lo_half;
+  cv::minMaxLoc(oracle, &lo_full);
+  cv::minMaxLoc(half, &lo_half);
+  EXPECT_LT(lo_full, 1.6 * lo_half);
+  EXPECT_GT(lo_full, 2.4 * lo_half);
+  // Drops as in Regress: the occluded line's patches drop out of the oracle too.
+  cv::Mat seen(kS, kS, CV_8U, cv::Scalar(255));
+  seen(cv::Rect(0, 66, 62, 62)).setTo(0);
+  cv::Mat t_occluded = t.clone();
+  t_occluded.setTo(0.0f, seen == 0);
+  DetailTiming occluded;
+  const cv::Mat D = r.AssembleFromTruth(t_occluded, seen, truth, &occluded);
+  EXPECT_GT(occluded.dropped, 0);
+  double lo, hi;
+  cv::minMaxLoc(D(cv::Rect(10, 76, 42, 42)), &lo, &hi);
+  EXPECT_GT(lo, -0.02);
+  // A truth map of the wrong size or with NaNs is refused.
+  EXPECT_THROW(r.AssembleFromTruth(t, cv::Mat(), cv::Mat(64, 64, CV_32F, cv::Scalar(0))), Error);
+  cv::Mat nan = truth.clone();
+  nan.at<float>(40, 64) = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_THROW(r.AssembleFromTruth(t, cv::Mat(), nan), Error);
 }
 
 // Steps 1–4 against a reference built from the training blocks directly: on every

@@ -365,6 +365,44 @@ TEST(Experiment, EachStageKindKeysItsOwnCodeVersion) {
   EXPECT_THROW(current.Of("no-such-kind"), Error);
 }
 
+// Rung R2-oracle (dataset.truth_detail): a truth-maps stage of every frame feeds the
+// capture, which assembles D^t from it; the capture is keyed apart from the
+// regressing one of the same sequence and model.
+TEST(Experiment, TheOracleRungAssemblesDetailFromEveryFramesTruth) {
+  const char* config = R"(
+name: oracle
+dataset: {landmarks: ground-truth-surface, test_actors: 1}
+variants:
+  detail:
+    regressed: {}
+    oracle: {dataset.truth_detail: true}
+sweep:
+  mode: grid
+  values:
+    detail: [regressed, oracle]
+)";
+  const auto runs = ExpandRuns(ParseExperimentConfig(config, "oracle.yaml"));
+  ASSERT_EQ(runs.size(), 2u);
+  const fs::path cache = "/tmp/cache";
+  const StageVersions v1 = StageVersions::Uniform("1");
+  const auto regressed = PlanRunStages(runs[0], cache, v1);
+  const auto oracle = PlanRunStages(runs[1], cache, v1);
+  EXPECT_EQ(FindStage(regressed, "truth-maps"), nullptr);
+  const ExperimentStage* maps = FindStage(oracle, "truth-maps");
+  ASSERT_NE(maps, nullptr);
+  const auto frames = std::find(maps->argv.begin(), maps->argv.end(), "--frames");
+  ASSERT_NE(frames, maps->argv.end());
+  EXPECT_EQ(*std::next(frames), "-1");  // every frame, not only the wrinkle frames
+  const ExperimentStage* capture = FindStage(oracle, "capture");
+  ASSERT_NE(capture, nullptr);
+  EXPECT_NE(std::find(capture->depends.begin(), capture->depends.end(), maps->key), capture->depends.end());
+  const std::string truth_detail = "detail_from_truth_maps=" + (maps->dir / "maps").string();
+  EXPECT_NE(std::find(capture->argv.begin(), capture->argv.end(), truth_detail), capture->argv.end());
+  EXPECT_EQ(FindStage(oracle, "sequence")->key, FindStage(regressed, "sequence")->key);
+  EXPECT_EQ(FindStage(oracle, "model")->key, FindStage(regressed, "model")->key);
+  EXPECT_NE(capture->key, FindStage(regressed, "capture")->key);
+}
+
 TEST(Experiment, VariantsSweepBundlesOfSettingsAndTheLadderPlansItsRungs) {
   const auto runs = ExpandRuns(ParseExperimentConfig(kLadder, "ladder.yaml"));
   ASSERT_EQ(runs.size(), 6u);

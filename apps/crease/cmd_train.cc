@@ -123,7 +123,8 @@ struct TruthMapsArgs {
 void AddTruthMapsCommand(CLI::App& app) {
   auto* cmd = app.add_subcommand("truth-maps",
                                  "The true detail D* (Sec. 4.1, eval/detail_truth.h) of a studio sequence's frames, "
-                                 "with a model's G: the maps `capture --set wrinkle_map_from_maps=DIR` reads");
+                                 "with a model's G: the maps `capture --set wrinkle_map_from_maps=DIR` reads (rung R1) "
+                                 "and `--set detail_from_truth_maps=DIR` assembles D^t from (rung R2-oracle)");
   auto a = std::make_shared<TruthMapsArgs>();
   cmd->add_option("--dataset,-d", a->dataset, "Sequence folder from `crease synth sequence`")->required();
   cmd->add_option("--model,-m", a->model_path, "Detail model (.cdm): its G and map resolution")->required();

@@ -32,6 +32,18 @@ MatX3d CameraVertices(const FaceRig& rig, const Eigen::VectorXd& identity, const
   return V;
 }
 
+// Frame `frame`'s map of a folder of per-frame maps NNNNNN.exr (channel 0, mm, the
+// rig's UV layout), as CV_32F R×R. `option` names the option that asked for it.
+cv::Mat ReadFrameMap(const std::string& dir, int frame, int R, const char* option) {
+  const std::filesystem::path p = std::filesystem::path(dir) / fmt::format("{:06d}.exr", frame);
+  Require(std::filesystem::is_regular_file(p), fmt::format("{}: missing ({} needs a map per frame)", p.string(), option));
+  cv::Mat d = ReadImage(p, /*srgb=*/false);
+  if (d.channels() > 1) cv::extractChannel(d, d, 0);
+  Require(d.rows == d.cols, fmt::format("{}: the map is {}×{}, expected a square map", p.string(), d.cols, d.rows));
+  d.convertTo(d, CV_32F);
+  return d.rows == R ? d : ResampleSquareMap(d, R);
+}
+
 }  // namespace
 
 cv::Mat WrinkleTextureFromDisplacement(const cv::Mat& displacement, int R) {
@@ -58,6 +70,7 @@ void CaptureOptions::VisitFields(OptionVisitor& v) {
   v.Field("mesoscopic_detail", mesoscopic_detail);
   v.Field("build_hifi_mesh", build_hifi_mesh);
   v.Field("wrinkle_map_from_maps", wrinkle_map_from_maps);
+  v.Field("detail_from_truth_maps", detail_from_truth_maps);
 }
 
 void CaptureOptions::Check() const {
@@ -165,12 +178,7 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
     if (options_.wrinkle_map_from_maps.empty()) {
       detail_->AddWrinkleFrame(out.texture.gray, out.texture.seen, expression);
     } else {
-      const std::filesystem::path p =
-          std::filesystem::path(options_.wrinkle_map_from_maps) / fmt::format("{:06d}.exr", out.frame);
-      Require(std::filesystem::is_regular_file(p),
-              fmt::format("{}: missing (wrinkle_map_from_maps needs a map per wrinkle frame)", p.string()));
-      cv::Mat d = ReadImage(p, /*srgb=*/false);
-      if (d.channels() > 1) cv::extractChannel(d, d, 0);
+      const cv::Mat d = ReadFrameMap(options_.wrinkle_map_from_maps, out.frame, map_resolution_, "wrinkle_map_from_maps");
       detail_->AddWrinkleFrame(out.texture.gray, out.texture.seen, expression,
                                WrinkleTextureFromDisplacement(d, map_resolution_));
     }
@@ -208,7 +216,12 @@ std::vector<CapturedFrame> CaptureSession::Flush() {
 void CaptureSession::RegressAndFinish(CapturedFrame* frame) {
   if (!frame->has_mesh) return;
   auto t0 = std::chrono::steady_clock::now();
-  if (options_.regress_detail) {
+  if (options_.regress_detail && !options_.detail_from_truth_maps.empty()) {
+    const cv::Mat truth =
+        ReadFrameMap(options_.detail_from_truth_maps, frame->frame, map_resolution_, "detail_from_truth_maps");
+    frame->displacement =
+        detail_->AssembleFromTruth(frame->texture.gray, frame->texture.seen, truth, &frame->timing.detail);
+  } else if (options_.regress_detail) {
     frame->displacement = detail_->Regress(frame->texture.gray, frame->texture.seen, &frame->timing.detail);
   } else {
     frame->displacement = cv::Mat::zeros(map_resolution_, map_resolution_, CV_32F);

@@ -82,6 +82,13 @@ struct CaptureOptions {
   // (WrinkleTextureFromDisplacement): the patches then sit where the lines truly
   // are, and only the regression from T^t is real. Empty = the paper's.
   std::string wrinkle_map_from_maps;
+  // Issue 17's ladder rung R2-oracle (not in the paper): a folder of the frames' true
+  // D* maps NNNNNN.exr (as `crease truth-maps` writes them with the model's G). D^t is
+  // then assembled from each frame's own truth on the capture's patches instead of
+  // regressed from T^t (DetailRegressor::AssembleFromTruth): the ceiling of the
+  // layout, gate, PCA, merge and fill, what a perfect regressor would give. Empty =
+  // the paper's regression.
+  std::string detail_from_truth_maps;
 
   // All fields of all stages, flattened (keys are unique).
   void VisitFields(OptionVisitor& v);

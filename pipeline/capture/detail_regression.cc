@@ -124,6 +124,14 @@ struct DetailRegressor::Impl {
     if (!warps_texture()) f.seen = seen;  // the frame's own mask, as without a reference
     return f;
   }
+  // One frame's patches t_i (one per row) and which of them drop out.
+  struct Sampled {
+    RowMatrixXf patches;
+    std::vector<uint8_t> drop;
+  };
+  Sampled SampleFrame(const cv::Mat& gray, const cv::Mat& seen, DetailTiming* t) const;
+  cv::Mat Assemble(const RowMatrixXf& c, const std::vector<uint8_t>& drop, DetailTiming* t) const;
+  void RenormaliseDropped(const std::vector<uint8_t>& drop, cv::Mat* D) const;
   // The chart texels seen in a frame (coverage ∧ seen; empty seen = all).
   cv::Mat SeenChart(const cv::Mat& seen) const {
     cv::Mat seen_chart = coverage.clone();
@@ -444,6 +452,86 @@ void DetailRegressor::FixLayout() {
 
 bool DetailRegressor::layout_fixed() const { return impl_->fixed; }
 
+// Steps 0–1 of Regress and AssembleFromTruth: the input T^t (flattened by the
+// aligned reference), its patches t_i on the fixed layout, and the patches that drop
+// out this frame.
+DetailRegressor::Impl::Sampled DetailRegressor::Impl::SampleFrame(const cv::Mat& gray, const cv::Mat& seen,
+                                                                DetailTiming* t) const {
+  auto t0 = Clock::now();
+  ReferenceAlignmentReport alignment;
+  const Frame input = Input(gray, seen, &alignment);
+  if (warps_texture() || warps_reference()) t->reference_shift = alignment.mean_shift;
+  t->align_ms = MsSince(t0);
+
+  t0 = Clock::now();
+  Sampled s;
+  Eigen::MatrixXf sampled;  // N × n, column-major (PatchSampler's layout)
+  sampler->Sample(input.gray, &sampled);
+  s.patches = sampled;  // one patch per row, for RegressBatch
+  s.drop = Drops(input.gray, input.seen);
+  for (uint8_t d : s.drop) t->dropped += d;
+  t->sample_ms = MsSince(t0);
+  return s;
+}
+
+// Steps 3–5: d_i = mean + basis · c_i (dropped patches: 0), merged by averaging over
+// the kept patches covering each texel, the uncovered chart texels Poisson-filled.
+cv::Mat DetailRegressor::Impl::Assemble(const RowMatrixXf& c, const std::vector<uint8_t>& drop,
+                                        DetailTiming* t) const {
+  const int N = layout.num_patches(), n = layout.patch_size * layout.patch_size;
+  auto t0 = Clock::now();
+  Eigen::MatrixXf d(N, n);  // column-major, as Splat takes it
+  const Eigen::MatrixXf& basis = model.pca.basis;  // n × D
+  const Eigen::VectorXf& mean = model.pca.mean;
+  constexpr int kBlock = 128;
+  tbb::parallel_for(tbb::blocked_range<int>(0, (n + kBlock - 1) / kBlock), [&](const tbb::blocked_range<int>& r) {
+    for (int b = r.begin(); b != r.end(); ++b) {
+      const int j0 = b * kBlock, cols = std::min(kBlock, n - j0);
+      d.middleCols(j0, cols).noalias() = c * basis.middleRows(j0, cols).transpose();
+      d.middleCols(j0, cols).rowwise() += mean.segment(j0, cols).transpose();
+      if (t->dropped > 0) {
+        for (int k = 0; k < N; ++k)
+          if (drop[k]) d.block(k, j0, 1, cols).setZero();
+      }
+    }
+  });
+  t->reconstruct_ms = MsSince(t0);
+
+  t0 = Clock::now();
+  cv::Mat D = sampler->Splat(d);  // Σ_kept w d / Σ_all w (dropped rows are 0)
+  if (t->dropped > 0) RenormaliseDropped(drop, &D);
+  t->merge_ms = MsSince(t0);
+
+  t0 = Clock::now();
+  fill->Apply(&D);  // 0 outside the chart
+  t->fill_ms = MsSince(t0);
+  return D;
+}
+
+// Where dropped patches had weight, divides the merge by the kept share
+// 1 − Σ_dropped w_k / Σ w, only on the dropped patches' footprints (sequential,
+// fixed order). calloc: only the touched pages of the scratch map are zeroed.
+void DetailRegressor::Impl::RenormaliseDropped(const std::vector<uint8_t>& drop, cv::Mat* D) const {
+  const int N = layout.num_patches();
+  std::unique_ptr<float, decltype(&std::free)> acc(static_cast<float*>(std::calloc(static_cast<size_t>(R) * R, sizeof(float))),
+                                                   &std::free);
+  Require(acc != nullptr, "DetailRegressor::Regress: out of memory");
+  std::vector<int32_t> touched;
+  for (int k = 0; k < N; ++k) {
+    if (!drop[k]) continue;
+    for (int64_t e = share_begin[k]; e < share_begin[k + 1]; ++e) {
+      float& a = acc.get()[share_texel[e]];
+      if (a == 0.0f) touched.push_back(share_texel[e]);
+      a += share_value[e];
+    }
+  }
+  float* o = D->ptr<float>(0);
+  for (int32_t i : touched) {
+    const float kept = 1.0f - acc.get()[i];
+    o[i] = kept > 1e-4f ? o[i] / kept : 0.0f;
+  }
+}
+
 cv::Mat DetailRegressor::Regress(const cv::Mat& gray, const cv::Mat& seen, DetailTiming* timing) const {
   const Impl& m = *impl_;
   Require(m.fixed, "DetailRegressor::Regress: the layout is not fixed yet (add the first N frames with "
@@ -458,83 +546,41 @@ cv::Mat DetailRegressor::Regress(const cv::Mat& gray, const cv::Mat& seen, Detai
     if (timing) *timing = t;
     return D;
   }
-  const int w = m.layout.patch_size, n = w * w, Dim = m.model.pca.dimensions();
-
-  // 0. The input: T^t, or T^t flattened by the (aligned) reference.
-  auto t0 = Clock::now();
-  ReferenceAlignmentReport alignment;
-  const Impl::Frame input = m.Input(gray, seen, &alignment);
-  const cv::Mat& src = input.gray;
-  if (m.warps_texture() || m.warps_reference()) t.reference_shift = alignment.mean_shift;
-  t.align_ms = MsSince(t0);
-
-  // 1. Sample t_i on the fixed layout; which patches drop out this frame.
-  t0 = Clock::now();
-  Eigen::MatrixXf sampled;  // N × n, column-major (PatchSampler's layout)
-  m.sampler->Sample(src, &sampled);
-  RowMatrixXf patches = sampled;  // one patch per row, for RegressBatch
-  const std::vector<uint8_t> drop = m.Drops(src, input.seen);
-  int dropped = 0;
-  for (uint8_t d : drop) dropped += d;
-  t.dropped = dropped;
-  t.sample_ms = MsSince(t0);
+  // 0–1. T^t (flattened), its patches t_i, the drops.
+  Impl::Sampled s = m.SampleFrame(gray, seen, &t);  // RegressBatch may normalise the patches in place
 
   // 2. Eq. 6: c_i = c̄ + Σ_k R^k(t_i).
-  t0 = Clock::now();
-  RowMatrixXf c(N, Dim);
-  m.model.RegressBatch(patches.data(), N, c.data());
+  const auto t0 = Clock::now();
+  RowMatrixXf c(N, m.model.pca.dimensions());
+  m.model.RegressBatch(s.patches.data(), N, c.data());
   t.regress_ms = MsSince(t0);
 
-  // 3. d_i = mean + basis · c_i (dropped patches: 0), in fixed column blocks.
-  t0 = Clock::now();
-  Eigen::MatrixXf d(N, n);  // column-major, as Splat takes it
-  const Eigen::MatrixXf& basis = m.model.pca.basis;  // n × D
-  const Eigen::VectorXf& mean = m.model.pca.mean;
-  constexpr int kBlock = 128;
-  tbb::parallel_for(tbb::blocked_range<int>(0, (n + kBlock - 1) / kBlock), [&](const tbb::blocked_range<int>& r) {
-    for (int b = r.begin(); b != r.end(); ++b) {
-      const int j0 = b * kBlock, cols = std::min(kBlock, n - j0);
-      d.middleCols(j0, cols).noalias() = c * basis.middleRows(j0, cols).transpose();
-      d.middleCols(j0, cols).rowwise() += mean.segment(j0, cols).transpose();
-      if (dropped > 0) {
-        for (int k = 0; k < N; ++k)
-          if (drop[k]) d.block(k, j0, 1, cols).setZero();
-      }
-    }
-  });
-  t.reconstruct_ms = MsSince(t0);
+  // 3–5. Reconstruct, merge, fill.
+  D = m.Assemble(c, s.drop, &t);
+  if (timing) *timing = t;
+  return D;
+}
 
-  // 4. Merge: average over the (kept) patches covering each texel.
-  t0 = Clock::now();
-  D = m.sampler->Splat(d);  // Σ_kept w d / Σ_all w (dropped rows are 0)
-  if (dropped > 0) {
-    // Renormalise where dropped patches had weight: divide by the kept share
-    // 1 − Σ_dropped w_k / Σ w, only on the dropped patches' footprints (sequential,
-    // fixed order). calloc: only the touched pages of the scratch map are zeroed.
-    std::unique_ptr<float, decltype(&std::free)> acc(static_cast<float*>(std::calloc(static_cast<size_t>(R) * R, sizeof(float))),
-                                                     &std::free);
-    Require(acc != nullptr, "DetailRegressor::Regress: out of memory");
-    std::vector<int32_t> touched;
-    for (int k = 0; k < N; ++k) {
-      if (!drop[k]) continue;
-      for (int64_t e = m.share_begin[k]; e < m.share_begin[k + 1]; ++e) {
-        float& a = acc.get()[m.share_texel[e]];
-        if (a == 0.0f) touched.push_back(m.share_texel[e]);
-        a += m.share_value[e];
-      }
-    }
-    float* o = D.ptr<float>(0);
-    for (int32_t t : touched) {
-      const float kept = 1.0f - acc.get()[t];
-      o[t] = kept > 1e-4f ? o[t] / kept : 0.0f;
-    }
+cv::Mat DetailRegressor::AssembleFromTruth(const cv::Mat& gray, const cv::Mat& seen, const cv::Mat& truth,
+                                           DetailTiming* timing) const {
+  const Impl& m = *impl_;
+  Require(m.fixed, "DetailRegressor::AssembleFromTruth: the layout is not fixed yet");
+  m.RequireFrame(gray, seen, "DetailRegressor::AssembleFromTruth");
+  m.RequireFrame(truth, cv::Mat(), "DetailRegressor::AssembleFromTruth truth");
+  Require(cv::checkRange(truth), "DetailRegressor::AssembleFromTruth: the truth map has non-finite values");
+  DetailTiming t;
+  const int R = m.R, N = m.layout.num_patches();
+  t.patches = N;
+  if (N == 0) {
+    if (timing) *timing = t;
+    return cv::Mat(R, R, CV_32F, cv::Scalar(0));
   }
-  t.merge_ms = MsSince(t0);
-
-  // 5. Poisson fill of the uncovered chart texels; 0 outside the chart.
-  t0 = Clock::now();
-  m.fill->Apply(&D);
-  t.fill_ms = MsSince(t0);
+  const Impl::Sampled s = m.SampleFrame(gray, seen, &t);  // for the drops only
+  // 2'. The truth's own patches projected onto the model's basis: c_i = basisᵀ (d_i − mean).
+  const auto t0 = Clock::now();
+  const RowMatrixXf c = m.model.pca.ProjectPatches(m.sampler->Sample(truth));
+  t.regress_ms = MsSince(t0);
+  const cv::Mat D = m.Assemble(c, s.drop, &t);
   if (timing) *timing = t;
   return D;
 }

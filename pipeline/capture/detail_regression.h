@@ -195,6 +195,17 @@ class DetailRegressor {
   // AddWrinkleFrame. Const and deterministic (the same bytes for any thread count).
   cv::Mat Regress(const cv::Mat& gray, const cv::Mat& seen, DetailTiming* timing = nullptr) const;
 
+  // Issue 17's rung R2-oracle (not in the paper): D^t as a perfect regressor would
+  // give it. The patches of `truth` (CV_32F R×R, mm: the frame's true D*) on the
+  // fixed layout, projected onto the model's PCA basis (the best the model can
+  // output), then dropped (unseen, gated: decided on gray / seen as in Regress),
+  // merged and Poisson-filled exactly as Regress does with the regressed ones. So
+  // the oracle's D^t against D* is the ceiling of the layout, the gate, the PCA, the
+  // merge and the fill; the regression costs the rest. Throws Error as Regress, and
+  // on a truth map of the wrong type or size or with non-finite values.
+  cv::Mat AssembleFromTruth(const cv::Mat& gray, const cv::Mat& seen, const cv::Mat& truth,
+                            DetailTiming* timing = nullptr) const;
+
   // Which patches of layout() drop out of the frame (1 = dropped: unseen, or gated;
   // header "Unseen texels"), as Regress decides. Requires layout_fixed().
   std::vector<uint8_t> DroppedPatches(const cv::Mat& gray, const cv::Mat& seen) const;
