@@ -206,6 +206,38 @@ TEST(PatchesTest, SamplePatchOfLinearFunctionIsExact) {
   EXPECT_EQ(patch[5], f.at<float>(30, 21));
 }
 
+// The pair augmentation's copies: the same patch moved across its line (along e1) by
+// ±k · shift; a copy's sample equals the original's sample shifted by k · shift texels
+// along its x axis; copies leaving the map are skipped.
+TEST(PatchesTest, ShiftedLayoutMovesCopiesAcrossTheLine) {
+  const int S = 64, w = 9;
+  PatchLayout layout;
+  layout.map_size = S;
+  layout.patch_size = w;
+  layout.patches = {{Eigen::Vector2f(30, 32), 0.4f}, {Eigen::Vector2f(1.5f, 20), 0.0f}};
+  EXPECT_EQ(ShiftedLayout(layout, 2.0, 0).num_patches(), 2);
+  const PatchLayout shifted = ShiftedLayout(layout, 2.0, 2);
+  // 2 originals, then k = −2, −1, 1, 2 of each; the second patch's k = −1, −2 copies
+  // (x = −0.5, −2.5) leave the map.
+  ASSERT_EQ(shifted.num_patches(), 2 + 4 + 2);
+  shifted.Validate("shifted");
+  cv::Mat f(S, S, CV_32F);
+  for (int y = 0; y < S; ++y)
+    for (int x = 0; x < S; ++x) f.at<float>(y, x) = static_cast<float>(0.3 + 0.01 * x - 0.02 * y);
+  std::vector<float> original(w * w), copy(w * w);
+  SamplePatch(f, layout.patches[0], w, original.data());
+  // Order: the originals, then per k = −2, −1, 1, 2 the copies that stay on the map:
+  // [p0], [p0], [p0, p1], [p0, p1]; k = 2 of the first patch is the 7th.
+  const PatchFrame& plus2 = shifted.patches[6];
+  EXPECT_FLOAT_EQ(plus2.angle, 0.4f);
+  SamplePatch(f, plus2, w, copy.data());
+  // f is linear: moving by 4 texels along e1 adds 4 · (0.01 cos θ − 0.02 sin θ).
+  const double step = 4 * (0.01 * std::cos(0.4) - 0.02 * std::sin(0.4));
+  for (int i = 0; i < w * w; ++i) EXPECT_NEAR(copy[i] - original[i], step, 1e-5) << i;
+  EXPECT_THROW(ShiftedLayout(layout, 0.0, 1), Error);
+  EXPECT_THROW(ShiftedLayout(layout, 2.0, -1), Error);
+}
+
 TEST(PatchesTest, SamplerMatchesSamplePatchAndSplatReproducesSmoothMaps) {
   const int S = 128;
   const SyntheticMap m = MakeSyntheticMap(S, 5);

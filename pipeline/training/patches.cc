@@ -421,6 +421,28 @@ cv::Mat PatchSampler::Splat(const Eigen::MatrixXf& patches) const {
 // ---------------------------------------------------------------------------
 // Training pairs (Sec. 4.2).
 
+PatchLayout ShiftedLayout(const PatchLayout& layout, double shift_texels, int steps) {
+  Require(steps >= 0, fmt::format("ShiftedLayout: steps = {} must be >= 0", steps));
+  if (steps == 0) return layout;
+  Require(std::isfinite(shift_texels) && shift_texels > 0,
+          fmt::format("ShiftedLayout: shift = {} texels must be finite and > 0", shift_texels));
+  PatchLayout out = layout;
+  const float S = static_cast<float>(layout.map_size);
+  for (int k = -steps; k <= steps; ++k) {
+    if (k == 0) continue;
+    for (const PatchFrame& f : layout.patches) {
+      const Eigen::Vector2f e1(std::cos(f.angle), std::sin(f.angle));
+      PatchFrame g = f;
+      g.center_texel += static_cast<float>(k * shift_texels) * e1;
+      if (g.center_texel.x() < 0 || g.center_texel.y() < 0 || g.center_texel.x() > S - 1 ||
+          g.center_texel.y() > S - 1)
+        continue;
+      out.patches.push_back(g);
+    }
+  }
+  return out;
+}
+
 TrainingPatches ExtractTrainingPatches(const PatchLayout& layout, const std::vector<cv::Mat>& textures,
                                        const std::vector<cv::Mat>& responses,
                                        const std::vector<cv::Mat>& displacements,

@@ -141,6 +141,15 @@ class PatchSampler {
   std::unique_ptr<Impl> impl_;
 };
 
+// Training-pair augmentation (not in the paper; TrainingOptions::pair_shift_texels and
+// pair_shift_steps): the layout followed by every patch repeated with its centre moved
+// across its line, along its x axis e1, by k · shift texels for k = ±1 … ±steps (same
+// angle). A capture places its own patches, so a wrinkle sits off their centres by
+// amounts the training layout never shows; the copies show them. Copies whose centre
+// leaves the map are skipped. steps = 0 returns the layout. Throws Error for steps < 0
+// or a shift that is not finite and > 0 when steps > 0.
+PatchLayout ShiftedLayout(const PatchLayout& layout, double shift_texels, int steps);
+
 // The training pairs of Sec. 4.2: for each patch k of the layout (in order) and
 // each expression j (in order) with r_j(centre of k) > α, the pair
 // t = patch of T^j, d = patch of D^j.

@@ -41,6 +41,8 @@ void TrainingOptions::VisitFields(OptionVisitor& v) {
   v.Field("max_actors", max_actors);
   v.Field("training_targets", training_targets);
   v.Field("validation_band_mm", validation_band_mm);
+  v.Field("pair_shift_texels", pair_shift_texels);
+  v.Field("pair_shift_steps", pair_shift_steps);
 }
 
 void TrainingOptions::Check() const {
@@ -55,6 +57,9 @@ void TrainingOptions::Check() const {
   Require(!training_lights.empty(), "TrainingOptions.training_lights must be \"all\", \"first\" or light names");
   CheckGe("TrainingOptions", "max_actors", max_actors, 0);
   CheckGe("TrainingOptions", "validation_band_mm", validation_band_mm, 0.0);
+  CheckGe("TrainingOptions", "pair_shift_steps", pair_shift_steps, 0);
+  Require(std::isfinite(pair_shift_texels) && pair_shift_texels > 0,
+          fmt::format("TrainingOptions.pair_shift_texels = {} must be finite and > 0", pair_shift_texels));
 }
 
 namespace {
@@ -448,8 +453,9 @@ TrainingPatches ActorPatchPairs(const ExtractionContext& ctx, const std::string&
   const WrinkleMap wmap = builder.Finish();
   PatchLayoutReport layout_report;
   const PatchLayout layout = PlacePatches(wmap, options.patch, &layout_report);
+  const PatchLayout pair_layout = ShiftedLayout(layout, options.pair_shift_texels, options.pair_shift_steps);
   TrainingPatches pairs =
-      ExtractTrainingPatches(layout, textures->gray, responses, textures->displacement, options.wrinkle);
+      ExtractTrainingPatches(pair_layout, textures->gray, responses, textures->displacement, options.wrinkle);
   ctx.sum.timing.Add("wrinkle map + patches", Since(t0));
   as->patch_locations = layout.num_patches();
   as->training_pairs = pairs.size();
