@@ -124,12 +124,12 @@ struct DetailRegressor::Impl {
     if (!warps_texture()) f.seen = seen;  // the frame's own mask, as without a reference
     return f;
   }
-  // One frame's patches t_i (one per row) and which of them drop out.
-  struct Sampled {
-    RowMatrixXf patches;
+  // One frame as the patches read it, and which patches drop out of it.
+  struct Prepared {
+    Frame input;
     std::vector<uint8_t> drop;
   };
-  Sampled SampleFrame(const cv::Mat& gray, const cv::Mat& seen, DetailTiming* t) const;
+  Prepared Prepare(const cv::Mat& gray, const cv::Mat& seen, DetailTiming* t) const;
   cv::Mat Assemble(const RowMatrixXf& c, const std::vector<uint8_t>& drop, DetailTiming* t) const;
   void RenormaliseDropped(const std::vector<uint8_t>& drop, cv::Mat* D) const;
   // The chart texels seen in a frame (coverage ∧ seen; empty seen = all).
@@ -452,26 +452,23 @@ void DetailRegressor::FixLayout() {
 
 bool DetailRegressor::layout_fixed() const { return impl_->fixed; }
 
-// Steps 0–1 of Regress and AssembleFromTruth: the input T^t (flattened by the
-// aligned reference), its patches t_i on the fixed layout, and the patches that drop
-// out this frame.
-DetailRegressor::Impl::Sampled DetailRegressor::Impl::SampleFrame(const cv::Mat& gray, const cv::Mat& seen,
-                                                                DetailTiming* t) const {
+// Step 0 of Regress and AssembleFromTruth (and DroppedPatches): the input T^t
+// (flattened by the aligned reference) and the patches that drop out this frame.
+// `t` (optional) receives the alignment's time and shift, the drops' time and count.
+DetailRegressor::Impl::Prepared DetailRegressor::Impl::Prepare(const cv::Mat& gray, const cv::Mat& seen,
+                                                               DetailTiming* t) const {
   auto t0 = Clock::now();
   ReferenceAlignmentReport alignment;
-  const Frame input = Input(gray, seen, &alignment);
-  if (warps_texture() || warps_reference()) t->reference_shift = alignment.mean_shift;
-  t->align_ms = MsSince(t0);
-
+  Prepared p{Input(gray, seen, &alignment), {}};
+  if (t && (warps_texture() || warps_reference())) t->reference_shift = alignment.mean_shift;
+  if (t) t->align_ms = MsSince(t0);
   t0 = Clock::now();
-  Sampled s;
-  Eigen::MatrixXf sampled;  // N × n, column-major (PatchSampler's layout)
-  sampler->Sample(input.gray, &sampled);
-  s.patches = sampled;  // one patch per row, for RegressBatch
-  s.drop = Drops(input.gray, input.seen);
-  for (uint8_t d : s.drop) t->dropped += d;
-  t->sample_ms = MsSince(t0);
-  return s;
+  p.drop = Drops(p.input.gray, p.input.seen);
+  if (t) {
+    for (uint8_t d : p.drop) t->dropped += d;
+    t->sample_ms += MsSince(t0);
+  }
+  return p;
 }
 
 // Steps 3–5: d_i = mean + basis · c_i (dropped patches: 0), merged by averaging over
@@ -515,7 +512,7 @@ void DetailRegressor::Impl::RenormaliseDropped(const std::vector<uint8_t>& drop,
   const int N = layout.num_patches();
   std::unique_ptr<float, decltype(&std::free)> acc(static_cast<float*>(std::calloc(static_cast<size_t>(R) * R, sizeof(float))),
                                                    &std::free);
-  Require(acc != nullptr, "DetailRegressor::Regress: out of memory");
+  Require(acc != nullptr, "DetailRegressor: out of memory (renormalising the merge)");
   std::vector<int32_t> touched;
   for (int k = 0; k < N; ++k) {
     if (!drop[k]) continue;
@@ -546,17 +543,22 @@ cv::Mat DetailRegressor::Regress(const cv::Mat& gray, const cv::Mat& seen, Detai
     if (timing) *timing = t;
     return D;
   }
-  // 0–1. T^t (flattened), its patches t_i, the drops.
-  Impl::Sampled s = m.SampleFrame(gray, seen, &t);  // RegressBatch may normalise the patches in place
+  // 0. T^t (flattened) and the drops; 1. its patches t_i on the fixed layout.
+  const Impl::Prepared p = m.Prepare(gray, seen, &t);
+  auto t0 = Clock::now();
+  Eigen::MatrixXf sampled;  // N × n, column-major (PatchSampler's layout)
+  m.sampler->Sample(p.input.gray, &sampled);
+  RowMatrixXf patches = sampled;  // one patch per row, for RegressBatch (normalised in place)
+  t.sample_ms += MsSince(t0);
 
   // 2. Eq. 6: c_i = c̄ + Σ_k R^k(t_i).
-  const auto t0 = Clock::now();
+  t0 = Clock::now();
   RowMatrixXf c(N, m.model.pca.dimensions());
-  m.model.RegressBatch(s.patches.data(), N, c.data());
+  m.model.RegressBatch(patches.data(), N, c.data());
   t.regress_ms = MsSince(t0);
 
   // 3–5. Reconstruct, merge, fill.
-  D = m.Assemble(c, s.drop, &t);
+  D = m.Assemble(c, p.drop, &t);
   if (timing) *timing = t;
   return D;
 }
@@ -575,12 +577,12 @@ cv::Mat DetailRegressor::AssembleFromTruth(const cv::Mat& gray, const cv::Mat& s
     if (timing) *timing = t;
     return cv::Mat(R, R, CV_32F, cv::Scalar(0));
   }
-  const Impl::Sampled s = m.SampleFrame(gray, seen, &t);  // for the drops only
+  const std::vector<uint8_t> drop = m.Prepare(gray, seen, &t).drop;
   // 2'. The truth's own patches projected onto the model's basis: c_i = basisᵀ (d_i − mean).
   const auto t0 = Clock::now();
   const RowMatrixXf c = m.model.pca.ProjectPatches(m.sampler->Sample(truth));
   t.regress_ms = MsSince(t0);
-  const cv::Mat D = m.Assemble(c, s.drop, &t);
+  const cv::Mat D = m.Assemble(c, drop, &t);
   if (timing) *timing = t;
   return D;
 }
@@ -590,8 +592,7 @@ std::vector<uint8_t> DetailRegressor::DroppedPatches(const cv::Mat& gray, const 
   Require(m.fixed, "DetailRegressor::DroppedPatches: the layout is not fixed yet");
   m.RequireFrame(gray, seen, "DetailRegressor::DroppedPatches");
   if (m.layout.num_patches() == 0) return {};
-  const Impl::Frame input = m.Input(gray, seen);
-  return m.Drops(input.gray, input.seen);
+  return m.Prepare(gray, seen, nullptr).drop;
 }
 
 const WrinkleMap& DetailRegressor::wrinkle_map() const {
