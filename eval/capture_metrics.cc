@@ -604,6 +604,22 @@ SurfaceError MeasureSurface(const TriMesh& h, const RayCaster& truth, double max
   return e;
 }
 
+void AddSlidTruthMoments(const cv::Mat& truth, const cv::Mat& mask, int shift_texels, MapMoments* moments) {
+  Require(truth.type() == CV_32F && mask.type() == CV_8U && truth.size() == mask.size(),
+          "AddSlidTruthMoments: expected a CV_32F map and a CV_8U mask of its size");
+  Require(shift_texels >= 1, fmt::format("AddSlidTruthMoments: shift {} texels, expected ≥ 1", shift_texels));
+  const int s = shift_texels;
+  if (s >= truth.cols || s >= truth.rows) return;
+  for (const cv::Point d : {cv::Point(s, 0), cv::Point(-s, 0), cv::Point(0, s), cv::Point(0, -s)}) {
+    // Texel p of `from` and p + d of `to`, over the overlap of the map and its moved copy.
+    const cv::Rect from(std::max(0, -d.x), std::max(0, -d.y), truth.cols - std::abs(d.x), truth.rows - std::abs(d.y));
+    const cv::Rect to = from + d;
+    cv::Mat both;
+    cv::bitwise_and(mask(from), mask(to), both);
+    moments->Add(truth(from), truth(to), both);
+  }
+}
+
 double BandNormalError(const cv::Mat& estimate, const cv::Mat& truth, const cv::Mat& mask, double mm_per_texel) {
   Require(estimate.type() == CV_32F && truth.type() == CV_32F && mask.type() == CV_8U &&
               estimate.size() == truth.size() && mask.size() == truth.size(),
@@ -890,6 +906,7 @@ struct FrameLoopState {
   // Pools of the registered truth (CaptureEvalSummary::Registered), active frames.
   MapMoments reg_detail, reg_band, reg_layer_band, reg_truth_band, reg_truth_layer_band;
   int reg_frames = 0;
+  std::array<MapMoments, kTruthShifts.size()> truth_shift;  // D*'s band slid (CaptureEvalSummary::truth_shift)
   CaptureEvalSummary::Landmarks landmarks;  // sums until ReduceSummary
   cv::Mat chart_u, chart_v;  // R×R: each texel's own chart coordinates, texels
   // The slide: the true texel each tracked texel sees minus its own, texels, over the
@@ -897,6 +914,11 @@ struct FrameLoopState {
   // v components (robust to texels whose pixel straddles a UV seam), summed.
   double slide_length = 0, slide_u = 0, slide_v = 0;
   int slide_frames = 0;
+  // The drift: the chart coordinates the first registered frame's texels see, and
+  // per later frame the median distance from them (texels), summed, and the largest.
+  cv::Mat first_u, first_v;
+  double drift_sum = 0, drift_max = 0;
+  int drift_frames = 0;
   // Displacement pooled over the active frames (and those where the wrinkle layer is active).
   MapMoments pooled_face, pooled_wrinkle, pooled_band, pooled_layer_band;
   std::vector<MapMoments> pooled_region, pooled_region_band;  // per CaptureEvalContext::region_masks
@@ -1091,6 +1113,14 @@ bool IsActiveFrame(const CaptureEvalOptions& o, const FrameCaptureEval& e) {
   return e.d_wrinkle_band.reference_rms_mm >= o.active_reference_rms_mm;
 }
 
+// D*'s band of an active frame against itself slid by each of kTruthShifts.
+void PoolSlidTruth(const CaptureEvalContext& c, const cv::Mat& Gb, FrameLoopState* st) {
+  for (size_t k = 0; k < kTruthShifts.size(); ++k) {
+    const int shift = std::max(1, static_cast<int>(std::lround(kTruthShifts[k].mm / c.mm_per_texel)));
+    AddSlidTruthMoments(Gb, c.wrinkle_mask, shift, &st->truth_shift[k]);
+  }
+}
+
 // Pools the frame's band (Db) into the displacement metrics of the frames where
 // it is active: against the truth (D, G, Gb) and against the dataset's wrinkle layer
 // (its band Lb, static lines included: the truth of crease ≤ 0.3) when the truth is D*.
@@ -1107,6 +1137,7 @@ void PoolDisplacement(const CaptureEvalContext& c, const cv::Mat& D, const cv::M
     st->pooled_face.Add(D, G, c.coverage);
     st->pooled_wrinkle.Add(D, G, c.wrinkle_mask);
     st->pooled_band.Add(Db, Gb, c.wrinkle_mask);
+    if (c.detail_truth) PoolSlidTruth(c, Gb, st);
     for (size_t k = 0; k < c.region_masks.size(); ++k) {
       st->pooled_region[k].Add(D, G, c.region_masks[k].second);
       st->pooled_region_band[k].Add(Db, Gb, c.region_masks[k].second);
@@ -1174,6 +1205,31 @@ void AddSlide(const CaptureEvalContext& c, const cv::Mat& du, const cv::Mat& dv,
   ++st->slide_frames;
 }
 
+// A frame's drift: the registered chart coordinates (u, v: R×R, texels, NaN where
+// not registered) against the first registered frame's, the median distance over
+// the wrinkle regions; the first registered frame is kept instead.
+void AddDrift(const CaptureEvalContext& c, const cv::Mat& u, const cv::Mat& v, FrameLoopState* st) {
+  if (st->first_u.empty()) {
+    st->first_u = u.clone();
+    st->first_v = v.clone();
+    return;
+  }
+  std::vector<float> distance;
+  for (int j = 0; j < c.R; ++j) {
+    for (int i = 0; i < c.R; ++i) {
+      if (!c.wrinkle_mask.at<uint8_t>(j, i)) continue;
+      const float d = std::hypot(u.at<float>(j, i) - st->first_u.at<float>(j, i),
+                                 v.at<float>(j, i) - st->first_v.at<float>(j, i));
+      if (std::isfinite(d)) distance.push_back(d);
+    }
+  }
+  if (distance.empty()) return;
+  const double median = Median(std::move(distance));
+  st->drift_sum += median;
+  st->drift_max = std::max(st->drift_max, median);
+  ++st->drift_frames;
+}
+
 // An active frame's D^t against the truth registered through the image at L~^t
 // (eval/registered_truth.h): D* raw and banded, and the wrinkle layer's band; and
 // the registered truth against the truth itself.
@@ -1184,6 +1240,7 @@ void PoolRegisteredTruth(const CaptureEvalContext& c, const RigTruth& t, const C
       st->registration->Register(t.true_cam, arrays.refined, {G, Gb, Lb, st->chart_u, st->chart_v});
   ++st->reg_frames;
   AddSlide(c, reg[3] - st->chart_u, reg[4] - st->chart_v, st);
+  AddDrift(c, reg[3], reg[4], st);
   st->reg_detail.Add(D, reg[0], c.wrinkle_mask);
   st->reg_band.Add(Db, reg[1], c.wrinkle_mask);
   st->reg_layer_band.Add(Db, reg[2], c.wrinkle_mask);
@@ -1457,6 +1514,9 @@ CaptureEvalSummary ReduceSummary(const CaptureEvalContext& c, const FrameLoopSta
   if (st.appearance) s.appearance = st.appearance->Result();
   s.registered = {st.reg_frames,           st.reg_detail.Result(),     st.reg_band.Result(),
                   st.reg_layer_band.Result(), st.reg_truth_band.Result(), st.reg_truth_layer_band.Result()};
+  if (st.truth_shift[0].n > 0) {
+    for (const MapMoments& m : st.truth_shift) s.truth_shift.push_back(m.Result());
+  }
   s.landmarks = st.landmarks;
   if (s.landmarks.frames > 0) {
     const double n = s.landmarks.frames;
@@ -1469,6 +1529,10 @@ CaptureEvalSummary ReduceSummary(const CaptureEvalContext& c, const FrameLoopSta
     s.registered.slide_mm = st.slide_length * scale;
     s.registered.slide_u_mm = st.slide_u * scale;
     s.registered.slide_v_mm = st.slide_v * scale;
+  }
+  if (st.drift_frames > 0) {
+    s.registered.drift_mm = st.drift_sum * c.mm_per_texel / st.drift_frames;
+    s.registered.drift_max_mm = st.drift_max * c.mm_per_texel;
   }
   if (c.cap.contains("timing")) s.timing_json = c.cap["timing"].dump();
   s.fps = c.cap.value("fps", 0.0);
@@ -1555,7 +1619,12 @@ std::string CaptureEvalSummary::ToJson() const {
                        {"truth_layer_band_correlation", registered.truth_layer_band.correlation},
                        {"slide_mm", registered.slide_mm},
                        {"slide_u_mm", registered.slide_u_mm},
-                       {"slide_v_mm", registered.slide_v_mm}};
+                       {"slide_v_mm", registered.slide_v_mm},
+                       {"drift_mm", registered.drift_mm},
+                       {"drift_max_mm", registered.drift_max_mm}};
+  }
+  for (size_t k = 0; k < truth_shift.size(); ++k) {  // else absent
+    j["truth_shift"][kTruthShifts[k].key] = truth_shift[k].correlation;
   }
   if (appearance.measured()) {  // rung A of the detail ladder (eval/appearance_ceiling.h); else absent
     j["appearance"] = {{"detail_correlation", appearance.correlation[0]},
@@ -1771,11 +1840,19 @@ std::string CaptureEvalSummary::ToMarkdown() const {
                        "texel), {} frames: D^t correlates {:.3f} with D* ({:.3f} in the wrinkle band), {:.3f} with the "
                        "wrinkle layer's band; the registration keeps {:.3f} of D*'s band and {:.3f} of the layer's "
                        "(correlation with the unregistered truth); the texture slides {:.2f} mm on the face in the "
-                       "wrinkle regions ({:+.2f} mm along u, {:+.2f} mm along v; medians per frame, mean over frames)\n",
+                       "wrinkle regions ({:+.2f} mm along u, {:+.2f} mm along v; medians per frame, mean over frames) "
+                       "and drifts {:.2f} mm from where it sat in the first of these frames (at most {:.2f} mm)\n",
                        registered.frames, registered.detail.correlation, registered.band.correlation,
                        registered.layer_band.correlation, registered.truth_band.correlation,
                        registered.truth_layer_band.correlation, registered.slide_mm, registered.slide_u_mm,
-                       registered.slide_v_mm);
+                       registered.slide_v_mm, registered.drift_mm, registered.drift_max_mm);
+    }
+    if (!truth_shift.empty()) {
+      o << "D*'s wrinkle band against itself slid on the face (what a slide of the texture costs any D^t in UV):";
+      for (size_t k = 0; k < truth_shift.size(); ++k) {
+        o << fmt::format(" {} mm {:.3f}", kTruthShifts[k].mm, truth_shift[k].correlation);
+      }
+      o << "\n";
     }
     if (appearance.measured()) {
       o << fmt::format("Appearance index (a linear filter of the capture's own texture T^t/T_ref - 1, fitted on half "

@@ -217,6 +217,18 @@ struct FrameCaptureEval {
   BandNormals band_normals;
 };
 
+// The slides of CaptureEvalSummary::truth_shift: mm on the face, and the JSON key.
+struct TruthShift {
+  double mm;
+  const char* key;
+};
+constexpr std::array<TruthShift, 4> kTruthShifts = {{{0.5, "0_5mm"}, {1.0, "1mm"}, {2.0, "2mm"}, {4.0, "4mm"}}};
+
+// Adds `truth` against itself moved by `shift_texels` (≥ 1) along +u, −u, +v and −v
+// to `moments`, over the texels of `mask` (CV_8U) whose moved texel is in `mask` too:
+// how fast a map decorrelates as a texture slides on the face.
+void AddSlidTruthMoments(const cv::Mat& truth, const cv::Mat& mask, int shift_texels, MapMoments* moments);
+
 struct CaptureEvalSummary {
   std::string capture, dataset;
   int frames = 0, tracked = 0, displacement_frames = 0, surface_frames = 0;
@@ -304,12 +316,22 @@ struct CaptureEvalSummary {
   // the true point a tracked texel sees lies from the texel itself on the chart
   // (per frame the median length and the median u and v components, +v towards the
   // chart's bottom; means over the registered frames), mm at the chart's mean scale,
-  // over the same texels.
+  // over the same texels. The drift: how far the true point a texel sees has moved
+  // on the chart since the first registered frame (per frame the median length over
+  // the texels registered in both; mean and maximum over the later frames), mm: 0
+  // for a texture that stays on the same skin however far it sits from the truth
+  // (the "temporally consistent" textures of Sec. 5.1).
   struct Registered {
     int frames = 0;
     MapComparison detail, band, layer_band, truth_band, truth_layer_band;
     double slide_mm = 0, slide_u_mm = 0, slide_v_mm = 0;
+    double drift_mm = 0, drift_max_mm = 0;
   } registered;
+  // D*'s wrinkle band against itself slid by kTruthShifts[k] along ±u and ±v
+  // (AddSlidTruthMoments), pooled over the active frames in the wrinkle regions: what
+  // a slide of the tracked texture on the face costs any D^t in UV, so that
+  // registered.slide_mm reads as a ceiling (empty without the detail truth).
+  std::vector<MapComparison> truth_shift;
   std::string timing_json = "{}";  // copied from the capture's summary
   double fps = 0, tracking_share = 0, detail_share = 0;
   std::vector<FrameCaptureEval> per_frame;

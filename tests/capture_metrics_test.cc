@@ -195,6 +195,42 @@ TEST(CaptureMetrics, BandNormalErrorIsTheAngleBetweenTheHeightFieldsNormals) {
   EXPECT_THROW(BandNormalError(flat, truth, cv::Mat::ones(n, n, CV_32F), mm), Error);
 }
 
+// How fast a truth decorrelates as the texture slides (CaptureEvalSummary::
+// truth_shift): horizontal lines of period P match themselves moved along u, and
+// moved along v by P / 4, P / 2 and P they correlate cos(2π s / P) = 0, −1 and 1, so
+// the four directions pool to 0.5, 0 and 1. Only texels whose moved texel is also
+// in the mask count; a bad map or a zero shift is an error.
+TEST(CaptureMetrics, SlidTruthDecorrelatesAsTheLinesMoveAcrossThemselves) {
+  const int n = 96, period = 16;
+  cv::Mat lines(n, n, CV_32F);
+  for (int y = 0; y < n; ++y)
+    for (int x = 0; x < n; ++x) lines.at<float>(y, x) = static_cast<float>(std::cos(2 * M_PI * y / period));
+  const cv::Mat all(n, n, CV_8U, cv::Scalar(1));
+  auto pooled = [&](const cv::Mat& map, const cv::Mat& mask, int shift) {
+    MapMoments m;
+    AddSlidTruthMoments(map, mask, shift, &m);
+    return m.Result().correlation;
+  };
+  EXPECT_NEAR(pooled(lines, all, period / 4), 0.5, 0.03);
+  EXPECT_NEAR(pooled(lines, all, period / 2), 0.0, 0.03);
+  EXPECT_NEAR(pooled(lines, all, period), 1.0, 1e-6);
+  // Noise outside a masked band of rows: with the band alone as the mask (and the
+  // moved texels inside it too) the figure is the lines' own.
+  cv::Mat noisy = lines.clone();
+  cv::Mat noise(n, n, CV_32F);
+  cv::randu(noise, -5.0, 5.0);
+  const cv::Rect band(0, 32, n, 48);
+  noise(band).setTo(0.0f);
+  noisy += noise;
+  cv::Mat inside = cv::Mat::zeros(n, n, CV_8U);
+  inside(band).setTo(1);
+  EXPECT_NEAR(pooled(noisy, inside, period), 1.0, 1e-6);
+  EXPECT_LT(pooled(noisy, all, period), 0.5);
+  MapMoments m;
+  EXPECT_THROW(AddSlidTruthMoments(lines, all, 0, &m), Error);
+  EXPECT_THROW(AddSlidTruthMoments(lines, cv::Mat::ones(n, n, CV_32F), 4, &m), Error);
+}
+
 // D^HF of the skin's colour alone (Sec. 5.3's DoG on the albedo's luminance): a dark
 // freckle becomes a pit, a flat albedo no relief, and it is the capture's own
 // MesoscopicMap of that luminance (one copy of the numerics).
