@@ -476,6 +476,7 @@ DetailRegressor::Impl::Prepared DetailRegressor::Impl::Prepare(const cv::Mat& gr
 cv::Mat DetailRegressor::Impl::Assemble(const RowMatrixXf& c, const std::vector<uint8_t>& drop,
                                         DetailTiming* t) const {
   const int N = layout.num_patches(), n = layout.patch_size * layout.patch_size;
+  const bool any_dropped = std::any_of(drop.begin(), drop.end(), [](uint8_t x) { return x != 0; });
   auto t0 = Clock::now();
   Eigen::MatrixXf d(N, n);  // column-major, as Splat takes it
   const Eigen::MatrixXf& basis = model.pca.basis;  // n × D
@@ -486,7 +487,7 @@ cv::Mat DetailRegressor::Impl::Assemble(const RowMatrixXf& c, const std::vector<
       const int j0 = b * kBlock, cols = std::min(kBlock, n - j0);
       d.middleCols(j0, cols).noalias() = c * basis.middleRows(j0, cols).transpose();
       d.middleCols(j0, cols).rowwise() += mean.segment(j0, cols).transpose();
-      if (t->dropped > 0) {
+      if (any_dropped) {
         for (int k = 0; k < N; ++k)
           if (drop[k]) d.block(k, j0, 1, cols).setZero();
       }
@@ -496,7 +497,7 @@ cv::Mat DetailRegressor::Impl::Assemble(const RowMatrixXf& c, const std::vector<
 
   t0 = Clock::now();
   cv::Mat D = sampler->Splat(d);  // Σ_kept w d / Σ_all w (dropped rows are 0)
-  if (t->dropped > 0) RenormaliseDropped(drop, &D);
+  if (any_dropped) RenormaliseDropped(drop, &D);
   t->merge_ms = MsSince(t0);
 
   t0 = Clock::now();
