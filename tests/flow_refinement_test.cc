@@ -296,6 +296,46 @@ TEST(FlowRefinement, StaysCloseToTheTruthOverAJitterySequence) {
               MeanError(Project(K, last.vertices), f.truth.vertex_pixels, f.truth.vertex_visible, chart));
   EXPECT_GT(last.reference_tracked, last.trusted / 5);
   EXPECT_LT(MeanError(Project(K, last.vertices), f.truth.vertex_pixels, f.truth.vertex_visible, chart), 1.0);
+
+  // flow_reference_gain: the pure chain (κ = 0) with the reference frame taken whole
+  // (gain 1), not at all (no reference) and half-way. The three agree up to frame 1
+  // (whose reference is its previous frame, up to LK's convergence tolerance
+  // lk_epsilon_px); at frame 2 a trusted point's position at gain ½ is the midpoint
+  // of the other two.
+  auto positions_at_frame_2 = [&](bool reference, double gain) {
+    FlowRefinementOptions o;
+    o.flow_pull_adaptive = false;
+    o.flow_tracker_pull = 0.0;
+    o.flow_reference_frame = reference;
+    o.flow_reference_gain = gain;
+    FlowRefiner refiner(rig, K, o);
+    Rng same(11);  // the same landmark noise in every run
+    RefinedFrame r;
+    for (int k = 0; k <= 2; ++k) {
+      const StudioFrame& fk = rendered[k];
+      r = refiner.Refine(Gray8(fk.image.srgb8),
+                         TrackedWithNoisyLandmarks(fk.truth, fk.truth.expression, fk.truth.cam_from_head, same),
+                         TheStudio().actor.identity, fk.truth.vertex_visible);
+    }
+    return r;
+  };
+  const RefinedFrame chain = positions_at_frame_2(false, 1.0);
+  const RefinedFrame whole = positions_at_frame_2(true, 1.0);
+  const RefinedFrame half = positions_at_frame_2(true, 0.5);
+  int moved = 0;
+  double worst = 0.0;
+  for (size_t i = 0; i < chain.status.size(); ++i) {
+    if (chain.status[i] != FlowPointStatus::kTrusted || whole.status[i] != FlowPointStatus::kTrusted ||
+        half.status[i] != FlowPointStatus::kTrusted)
+      continue;
+    const Eigen::RowVector2d mid = 0.5 * (chain.flow_positions.row(i) + whole.flow_positions.row(i));
+    worst = std::max(worst, (half.flow_positions.row(i) - mid).norm());
+    moved += (whole.flow_positions.row(i) - chain.flow_positions.row(i)).norm() > 0.1;
+  }
+  std::printf("reference gain ½: %d points moved > 0.1 px by the reference, worst distance from the midpoint %.2g px\n", moved,
+              worst);
+  EXPECT_GT(moved, 10);
+  EXPECT_LT(worst, FlowRefinementOptions{}.lk_epsilon_px);
 }
 
 // A smooth 2D deformation of a grid (as flow points would move) for MLS tests.

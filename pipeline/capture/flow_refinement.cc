@@ -40,6 +40,7 @@ void FlowRefinementOptions::VisitFields(OptionVisitor& v) {
   v.Field("flow_gate_chi2", flow_gate_chi2);
   v.Field("flow_reference_frame", flow_reference_frame);
   v.Field("flow_reference_max_px", flow_reference_max_px);
+  v.Field("flow_reference_gain", flow_reference_gain);
   v.Field("outlier_intensity", outlier_intensity);
   v.Field("outlier_distance_px", outlier_distance_px);
   v.Field("flow_point_spacing_mm", flow_point_spacing_mm);
@@ -78,6 +79,8 @@ void FlowRefinementOptions::Check() const {
   CheckLe(o, "flow_noise_rate", flow_noise_rate, 1.0);
   CheckGe(o, "flow_gate_chi2", flow_gate_chi2, 0.0);
   CheckGt(o, "flow_reference_max_px", flow_reference_max_px, 0.0);
+  CheckGt(o, "flow_reference_gain", flow_reference_gain, 0.0);
+  CheckLe(o, "flow_reference_gain", flow_reference_gain, 1.0);
   CheckGt(o, "outlier_intensity", outlier_intensity, 0.0);
   CheckGt(o, "outlier_distance_px", outlier_distance_px, 0.0);
   CheckGt(o, "flow_point_spacing_mm", flow_point_spacing_mm, 0.5);
@@ -739,7 +742,7 @@ void FlowRefiner::Impl::TrackFromReference(const std::vector<cv::Mat>& pyramid, 
     if ((p - flow->row(i)).norm() > o.flow_reference_max_px) continue;
     if (p.x() < 0 || p.y() < 0 || p.x() > K.width - 1 || p.y() > K.height - 1) continue;
     if (IntensityChange(reference_pyramid[0], from[k], pyramid[0], p.x(), p.y()) > o.outlier_intensity) continue;
-    flow->row(i) = p;
+    flow->row(i) += o.flow_reference_gain * (p - flow->row(i));
     ++out->reference_tracked;
   }
 }

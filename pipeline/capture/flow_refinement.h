@@ -160,6 +160,21 @@
 //      5.31 px, jitter 0.81 → 0.96 px; ground-truth fit 0.38 → 0.36 px; fast-motion
 //      clip: ground-truth prior 1.94 px either way, regressor 8.23 → 8.26 px,
 //      ground-truth fit 0.40 px either way) and costs a second LK pass.
+//      flow_reference_gain < 1 blends the reference's position into the chain's
+//      instead of taking it (crease 0.4.14, not in the paper). What the texture's
+//      drift on the skin says (`crease eval`'s registered.drift_mm; the held
+//      expressions, the real tracker, 3 seeds; detail-levers --profile holds-refine):
+//      the default drifts 2.07 mm; the pure chain 1.64, the reference frame with the
+//      pull 1.29, the pure chain with the reference 0.85, and with gain 0.3 and the
+//      Laplacian following the flow points (laplacian_flow_weight 10; the variant
+//      gated-level-anchored) 0.76 ± 0.13 mm (at most 1.30 against 3.27), jitter
+//      0.40 px instead of 0.59, 2D error 5.83 px either way; D^t against the truth
+//      registered through the image 0.188 instead of 0.137, but D^t on a still face
+//      0.845 instead of 0.898. The pull keeps the chain on the tracker's error, which
+//      changes with the expression; without it the chain keeps its first frame's
+//      error instead. With the true landmarks the anchored chain drifts 0.70 mm
+//      (0.76 with the default) but sits 4.1 px off instead of 2.5: the drift's floor
+//      of ~0.7 mm is LK's on the smooth forehead, not the tracker's. Off by default.
 #pragma once
 
 #include <cstdint>
@@ -222,6 +237,11 @@ struct FlowRefinementOptions {
   // lies within flow_reference_max_px of the chained one.
   bool flow_reference_frame = false;
   double flow_reference_max_px = 3.0;
+  // With flow_reference_frame: the chained position moves this fraction of the way to
+  // the position tracked from the reference (1 = takes it). Below 1 the pair is a
+  // complementary filter: the chain carries the frame-to-frame motion, smooth, and the
+  // reference bounds the drift, its per-frame noise averaged over ~1/gain frames.
+  double flow_reference_gain = 1.0;
   // ξ_α: intensity outlier threshold on gray in [0, 1] (8-bit / 255), Sec. 5.1.
   double outlier_intensity = 0.02;
   // ξ_β: distance outlier threshold between ũ^t and u^t, px (Sec. 5.1: 5 px; see
