@@ -382,9 +382,10 @@ struct FlowRefiner::Impl {
   // Projections of the flow points of `camera_vertices` (#V×3), px; NaN behind the camera.
   MatX2d Project(const MatX3d& camera_vertices) const;
   // Sec. 7's suggestion (flow_reference_frame): re-tracks the trusted points from the
-  // chain's first frame, starting at their chained positions, and keeps the result
-  // where it passes ξ_α against the reference and stays within
-  // flow_reference_max_px of the chain (out->reference_tracked counts them). At a
+  // chain's first frame, starting at their chained positions, and moves each chained
+  // position flow_reference_gain of the way to the result where it passes ξ_α against
+  // the reference and stays within flow_reference_max_px of the chain
+  // (out->reference_tracked counts them). At a
   // chain's first frame it stores that frame as the reference.
   void TrackFromReference(const std::vector<cv::Mat>& pyramid, const MatX2d& u, const std::vector<uint8_t>& vis,
                           MatX2d* flow, const std::vector<FlowPointStatus>& status, RefinedFrame* out);

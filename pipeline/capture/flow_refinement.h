@@ -233,8 +233,9 @@ struct FlowRefinementOptions {
   double flow_gate_chi2 = 25.0;
   // Sec. 7's suggestion, off by default (Differences 14): also track each trusted
   // point from the chain's first frame (the reference), starting at its chained
-  // position, and keep that position when it passes ξ_α against the reference and
-  // lies within flow_reference_max_px of the chained one.
+  // position, and move the chained position towards it (flow_reference_gain) when it
+  // passes ξ_α against the reference and lies within flow_reference_max_px of the
+  // chained one.
   bool flow_reference_frame = false;
   double flow_reference_max_px = 3.0;
   // With flow_reference_frame: the chained position moves this fraction of the way to
