@@ -923,6 +923,7 @@ struct FrameLoopState {
   MapMoments pooled_face, pooled_wrinkle, pooled_band, pooled_layer_band;
   std::vector<MapMoments> pooled_region, pooled_region_band;  // per CaptureEvalContext::region_masks
   int active_frames = 0, layer_active_frames = 0;
+  MapMoments still_pooled;  // D^t against the previous D^t over every still pair (MeasureStillFace)
   cv::Mat error_vectors;  // Fig. 11's picture, once drawn
   int error_vectors_frame = -1;
   int tracked_count = 0;
@@ -1165,16 +1166,20 @@ void MeasureDisplacementJitter(const CaptureEvalContext& c, const PreviousFrame&
   e->d_jitter_mm = n ? std::sqrt(sum / n) : 0.0;
 }
 
-// Still face: the true expression held since the previous frame; D^t against the previous D^t.
+// Still face: the true expression held since the previous frame; D^t against the
+// previous D^t, per pair and pooled into `pooled` (e's active flag already set).
 void MeasureStillFace(const CaptureEvalContext& c, const PreviousFrame& prev, int index, const cv::Mat& D,
-                      const Eigen::VectorXd& beta, FrameCaptureEval* e) {
+                      const Eigen::VectorXd& beta, FrameCaptureEval* e, MapMoments* pooled) {
   if (prev.frame != index - 1 || prev.D.empty() || prev.beta.size() != beta.size() ||
       !((beta - prev.beta).cwiseAbs().maxCoeff() < 1e-6)) {
     return;
   }
   const MapComparison cmp = CompareMaps(D, prev.D, c.wrinkle_mask);
   e->still = cmp.extracted_rms_mm > 0 && cmp.reference_rms_mm > 0;  // no patch, no detail: nothing to compare
+  if (!e->still) return;
   e->d_still_correlation = cmp.correlation;
+  e->still_active = IsActiveFrame(c.options, *e);
+  pooled->Add(D, prev.D, c.wrinkle_mask);
 }
 
 // The median of `values` (empty: 0).
@@ -1308,7 +1313,7 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
     PoolRegisteredTruth(c, t, arrays, d.D, G, Db, Gb, Lb, st);
   }
   MeasureDisplacementJitter(c, st->previous, index, d.band_err, e);
-  MeasureStillFace(c, st->previous, index, d.D, beta, e);
+  MeasureStillFace(c, st->previous, index, d.D, beta, e, &st->still_pooled);
   return d;
 }
 
@@ -1445,6 +1450,8 @@ void AverageDisplacementAndSurface(CaptureEvalSummary* s) {
       if (e.still) {
         s->d_still_correlation += e.d_still_correlation;
         ++s->still_pairs;
+        (e.still_active ? s->d_still_active_correlation : s->d_still_inactive_correlation) += e.d_still_correlation;
+        ++(e.still_active ? s->still_active_pairs : s->still_inactive_pairs);
       }
     }
     if (e.has_surface) {
@@ -1460,6 +1467,8 @@ void AverageDisplacementAndSurface(CaptureEvalSummary* s) {
   }
   if (d_jitter_frames > 0) s->d_jitter_mm /= d_jitter_frames;
   if (s->still_pairs > 0) s->d_still_correlation /= s->still_pairs;
+  if (s->still_active_pairs > 0) s->d_still_active_correlation /= s->still_active_pairs;
+  if (s->still_inactive_pairs > 0) s->d_still_inactive_correlation /= s->still_inactive_pairs;
   Divide(s->surface_frames, &s->surface_coarse);
   Divide(s->surface_frames, &s->surface_meso);
   Divide(s->surface_frames, &s->surface_full);
@@ -1511,6 +1520,7 @@ CaptureEvalSummary ReduceSummary(const CaptureEvalContext& c, const FrameLoopSta
   for (size_t k = 0; k < st.pooled_region.size(); ++k)
     s.d_by_region.push_back({c.region_masks[k].first, st.pooled_region[k].Result(), st.pooled_region_band[k].Result()});
   s.d_layer_band = st.pooled_layer_band.Result();
+  s.d_still_pooled_correlation = st.still_pooled.Result().correlation;
   if (st.appearance) s.appearance = st.appearance->Result();
   s.registered = {st.reg_frames,           st.reg_detail.Result(),     st.reg_band.Result(),
                   st.reg_layer_band.Result(), st.reg_truth_band.Result(), st.reg_truth_layer_band.Result()};
@@ -1553,6 +1563,24 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   return ReduceSummary(context, state, std::move(per_frame));
 }
 
+namespace {
+
+// The still face's pair counts and, where there are pairs, its correlations (else
+// not measured: absent, never a misleading 0).
+void AddStillFaceJson(const CaptureEvalSummary& s, json* d) {
+  (*d)["still_pairs"] = s.still_pairs;
+  (*d)["still_active_pairs"] = s.still_active_pairs;
+  (*d)["still_inactive_pairs"] = s.still_inactive_pairs;
+  if (s.still_pairs > 0) {
+    (*d)["still_correlation"] = s.d_still_correlation;
+    (*d)["still_pooled_correlation"] = s.d_still_pooled_correlation;
+  }
+  if (s.still_active_pairs > 0) (*d)["still_active_correlation"] = s.d_still_active_correlation;
+  if (s.still_inactive_pairs > 0) (*d)["still_inactive_correlation"] = s.d_still_inactive_correlation;
+}
+
+}  // namespace
+
 std::string CaptureEvalSummary::ToJson() const {
   json j;
   j["capture"] = capture;
@@ -1592,9 +1620,8 @@ std::string CaptureEvalSummary::ToJson() const {
                        {"wrinkle_layer_band", ComparisonJson(d_layer_band)},
                        {"wrinkle_layer_active_frames", layer_active_frames},
                        {"jitter_band_mm", d_jitter_mm},
-                       {"still_pairs", still_pairs},
                        {"offset_frames", offset_frames}};
-  if (still_pairs > 0) j["displacement"]["still_correlation"] = d_still_correlation;  // else not measured
+  AddStillFaceJson(*this, &j["displacement"]);
   if (offset_frames > 0) {  // else not measured (null), never a misleading 0
     j["displacement"]["offset_mm"] = d_offset_mm;
     j["displacement"]["offset_slide_mm"] = d_offset_slide_mm;
@@ -1675,7 +1702,10 @@ std::string CaptureEvalSummary::ToJson() const {
                              {"face_band", ComparisonJson(e.d_face_band)},
                              {"wrinkle_regions_band", ComparisonJson(e.d_wrinkle_band)},
                              {"jitter_band_mm", e.d_jitter_mm}};
-        if (e.still) f["displacement"]["still_correlation"] = e.d_still_correlation;
+        if (e.still) {
+          f["displacement"]["still_correlation"] = e.d_still_correlation;
+          f["displacement"]["still_active"] = e.still_active;
+        }
         if (e.has_offset) {
           f["displacement"]["offset_mm"] = e.d_offset_mm;
           f["displacement"]["offset_correlation"] = e.d_offset_correlation;
@@ -1832,8 +1862,10 @@ std::string CaptureEvalSummary::ToMarkdown() const {
                      d_jitter_mm);
     if (still_pairs > 0) {
       o << fmt::format("D^t on a still face (the true expression held), {} frame pairs: correlation with the previous "
-                       "frame's {:.3f} (wrinkle regions)\n",
-                       still_pairs, d_still_correlation);
+                       "frame's {:.3f} (wrinkle regions); {} pairs where the truth holds wrinkles {:.3f}, {} "
+                       "without {:.3f}; pooled over all pairs' texels {:.3f}\n",
+                       still_pairs, d_still_correlation, still_active_pairs, d_still_active_correlation,
+                       still_inactive_pairs, d_still_inactive_correlation, d_still_pooled_correlation);
     }
     if (registered.frames > 0) {
       o << fmt::format("Against the truth registered through the image at L~^t (what the tracked texture shows at each "

@@ -202,6 +202,7 @@ struct FrameCaptureEval {
   // exists and is not zero in both; the correlation of D^t with the previous frame's D^t in the
   // wrinkle regions (1 = the regression is stable where nothing changes).
   bool still = false;
+  bool still_active = false;  // a still pair whose truth holds wrinkles (an active frame, IsActiveFrame)
   double d_still_correlation = 0;
   // Wrinkle offset in offset_region, mm (+: D^t's wrinkles lie above the true ones,
   // towards the top of the face); measured on active frames only (has_offset).
@@ -260,6 +261,14 @@ struct CaptureEvalSummary {
   double d_jitter_mm = 0;  // mean over consecutive frame pairs
   int still_pairs = 0;               // consecutive frames of a still face (FrameCaptureEval::still)
   double d_still_correlation = 0;    // mean over them
+  // The same split by the held truth: pairs of active frames (the truth holds
+  // wrinkles: an expressed hold) and of the others (a neutral face, where D^t should
+  // be near 0 and a per-pair correlation rewards steady false detail as much as
+  // steady true detail); and one correlation pooled over every pair's texels, which
+  // weights each pair by D^t's energy.
+  int still_active_pairs = 0, still_inactive_pairs = 0;
+  double d_still_active_correlation = 0, d_still_inactive_correlation = 0;
+  double d_still_pooled_correlation = 0;
   // Wrinkle offset: mean over the measured frames, and the slide — the mean of the
   // last quarter of the measured frames minus that of the first quarter (for the
   // moving-light preset: light from above minus light from the front, Fig. 14).

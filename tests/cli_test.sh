@@ -166,6 +166,28 @@ print("  by part: " + ", ".join(f"{k} {v['px']:.3f}" for k, v in parts.items()))
 ok_parts = set(parts) == {"jaw", "brows", "nose", "eyes", "mouth"} and all(0 <= v["px"] < 0.5 and abs(v["dx"]) < 0.5 and abs(v["dy"]) < 0.5 for v in parts.values())
 sys.exit(0 if lm["frames"] >= 1 and lm["px"] < 0.5 and ok_parts else 1)
 PY
+# The still face (issue 17): D^t's frame-to-frame correlation over a held expression,
+# split by whether the held truth has wrinkles (eval's active frames). A perfect
+# regressor (D^t = D*) over a held brow raise correlates 1 and counts as a pair with
+# wrinkles; with the activity threshold out of reach it counts as one without.
+ok "synth sequence held brow raise" "$crease" synth sequence --rig "$tmp/head.crig" --actor "$tmp/actor.json" --preset scan-holds --first-frame 40 --frames 2 --size 160x120 -o "$tmp/hold"
+ok "capture held brow raise" "$crease" capture -i "$tmp/hold" --model "$tmp/model.cdm" --ground-truth-fit --set detail.wrinkle_frames=2 --no-meshes -o "$tmp/cap_hold"
+ok "eval held brow raise" "$crease" eval --capture "$tmp/cap_hold" --dataset "$tmp/hold" --set surface_every=0 --set truth_maps_dir="$tmp/hold_truth"
+mkdir -p "$tmp/still/displacement" && cp -r "$tmp/cap_hold/capture.json" "$tmp/cap_hold/rig.crig" "$tmp/cap_hold/frames" "$tmp/cap_hold/maps" "$tmp/still/" \
+  && cp "$tmp/hold_truth/000040.exr" "$tmp/hold_truth/000041.exr" "$tmp/still/displacement/"
+ok "eval still face" "$crease" eval --capture "$tmp/still" --dataset "$tmp/hold" --set surface_every=0 -o "$tmp/still_active"
+ok "eval still face, no active frame" "$crease" eval --capture "$tmp/still" --dataset "$tmp/hold" --set surface_every=0 --set active_reference_rms_mm=1e9 -o "$tmp/still_inactive"
+python3 - "$tmp/still_active/eval.json" "$tmp/still_inactive/eval.json" <<'PY' || { echo "FAIL: the still face split by the held truth"; fails=$((fails+1)); }
+import json, sys
+act, inact = (json.load(open(p))["displacement"] for p in sys.argv[1:3])
+for name, d in (("truth with wrinkles", act), ("threshold out of reach", inact)):
+    print(f"still face, {name}: {d['still_pairs']} pair(s), {d['still_active_pairs']} with wrinkles in the truth, "
+          f"{d['still_inactive_pairs']} without; correlation {d.get('still_correlation')}, pooled {d.get('still_pooled_correlation')}")
+sys.exit(0 if act["still_active_pairs"] == 1 and act["still_inactive_pairs"] == 0 and act["still_active_correlation"] > 0.9999
+         and act["still_pooled_correlation"] > 0.9999 and "still_inactive_correlation" not in act
+         and inact["still_inactive_pairs"] == 1 and inact["still_active_pairs"] == 0 and inact["still_inactive_correlation"] > 0.9999
+         and "still_active_correlation" not in inact else 1)
+PY
 bad "prior and fit controls together" "exclude each other" "$crease" capture -i "$tmp/seq" --model "$tmp/model.cdm" --ground-truth-prior --ground-truth-fit -o "$tmp/cap3"
 bad "capture missing model" "m3.cdm" "$crease" capture -i "$tmp/seq" --model "$tmp/m3.cdm" -o "$tmp/cap2"
 bad "capture model of another kind" "detail model" "$crease" capture -i "$tmp/seq" --model "$tmp/actor.json" -o "$tmp/cap2"
