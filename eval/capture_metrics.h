@@ -343,6 +343,8 @@ struct CaptureEvalSummary {
   std::vector<MapComparison> truth_shift;
   std::string timing_json = "{}";  // copied from the capture's summary
   double fps = 0, tracking_share = 0, detail_share = 0;
+  bool overlapped = false;        // the capture overlapped frames (CaptureSummary::overlapped)
+  double stage_ms_per_frame = 0;  // its steady frames' stage times summed
   std::vector<FrameCaptureEval> per_frame;
   // Fig. 11: the frame with the 2D error vectors of L^t (left) and L~^t (right),
   // from the true projections of the visible face vertices (CV_8UC3, RGB); empty when

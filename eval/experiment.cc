@@ -513,11 +513,13 @@ namespace {
 // (StageVersions; the rule is in experiment.h). 0.4.8, 0.4.9, 0.4.10, 0.4.13 and
 // 0.4.14 changed the eval alone (the band normal error, D^HF against the albedo's,
 // the displacement by wrinkle region, the truth slid on the face, the still face
-// split by the held truth and pooled).
+// split by the held truth and pooled). 0.4.14 also changed the capture's summary
+// (frames overlapped on the cores: its fps is the wall clock; D^t and every other
+// output unchanged).
 constexpr std::pair<const char*, const char*> kStageCodeVersions[] = {
     {"rig", "0.4.7"},      {"scans", "0.4.7"},    {"pairs", "0.4.7"},      {"model", "0.4.7"},
     {"loao", "0.4.7"},     {"tracker", "0.4.7"},  {"actor", "0.4.7"},      {"sequence", "0.4.7"},
-    {"truth-maps", "0.4.7"}, {"capture", "0.4.7"}, {"eval", "0.4.14"},
+    {"truth-maps", "0.4.7"}, {"capture", "0.4.14"}, {"eval", "0.4.14"},
 };
 
 }  // namespace

@@ -161,9 +161,14 @@ TEST(CaptureRun, WritesTheFolderAndSummarisesTheRun) {
   EXPECT_EQ(s.map_resolution, kR);
   EXPECT_EQ(s.identity.size(), rig.num_identity());
   EXPECT_DOUBLE_EQ(s.setup_s, 1.5);
-  // The speed: frames 1 and 4 are steady (not detected, not the first textured frame).
-  EXPECT_EQ(s.steady_frames, 2);
+  // The speed, frames overlapped (the default): frames 1 and 4 are steady (not
+  // detected, not the first textured frame), but only frame 4 is finished in a step
+  // of its own that begins no detected frame (the last step; frame 1 is finished with
+  // frame 0, after the wrinkle map).
+  EXPECT_TRUE(s.overlapped);
+  EXPECT_EQ(s.steady_frames, 1);
   EXPECT_GT(s.fps, 0.0);
+  EXPECT_GT(s.stage_ms_per_frame, 0.0);
   EXPECT_NEAR(s.fps * s.ms_per_frame, 1000.0, 1e-6);
   EXPECT_NEAR(s.tracking_share + s.detail_share, 1.0, 1e-9);
   ASSERT_FALSE(s.timing.empty());
@@ -209,6 +214,57 @@ TEST(CaptureRun, WritesTheFolderAndSummarisesTheRun) {
     EXPECT_NE(std::string(e.what()).find("mesh_every"), std::string::npos) << e.what();
   }
   EXPECT_FALSE(fs::exists(bad.out));
+}
+
+// Overlapped frames (the default: frame t+1's tracking and texture beside frame t's
+// D^t and H^t) write the serial order's files byte for byte, with the same frames
+// in the same order; only the stage times and the speed's bookkeeping differ.
+TEST(CaptureRun, OverlappedFramesWriteWhatTheSerialOrderWrites) {
+  const fs::path dataset = TinySequence();
+  const fs::path root = testing::FixtureDir("capture_run_overlap");
+  const DetailModel model = NoiseModel();
+  const FaceRig rig = CompatibleRig(Rig(), model);
+  std::vector<CaptureSummary> s;
+  for (const bool overlap : {false, true}) {
+    auto frames = OpenFrameSource(dataset);
+    const CameraIntrinsics K = frames->info().camera->intrinsics;
+    TruthTracker tracker(rig, dataset, kLost);
+    CaptureSession session(rig, model, K, TinyCaptureOptions());
+    CaptureRunOptions run;
+    run.out = root / (overlap ? "overlapped" : "serial");
+    run.overwrite = true;
+    run.mesh_every = 2;
+    run.write_textures = true;
+    run.overlap_frames = overlap;
+    s.push_back(RunCapture(run, TinyCaptureOptions(), model, K, frames.get(), &tracker, &session));
+  }
+  EXPECT_FALSE(s[0].overlapped);
+  EXPECT_EQ(s[0].steady_frames, 2);  // frames 1 and 4, their stage times summed
+  EXPECT_DOUBLE_EQ(s[0].ms_per_frame, s[0].stage_ms_per_frame);
+  EXPECT_TRUE(s[1].overlapped);
+  EXPECT_EQ(s[1].frame_indices, s[0].frame_indices);
+  EXPECT_EQ(s[1].detail_frames, s[0].detail_frames);
+
+  // Every file but the timings, byte for byte; the per-frame records without their times.
+  const auto without_times = [](nlohmann::json j) {
+    j.erase("timing_ms");
+    return j;
+  };
+  int compared = 0;
+  for (const fs::directory_entry& e : fs::recursive_directory_iterator(s[0].out)) {
+    if (!e.is_regular_file()) continue;
+    const fs::path rel = fs::relative(e.path(), s[0].out);
+    const fs::path other = s[1].out / rel;
+    ASSERT_TRUE(fs::is_regular_file(other)) << rel;
+    if (rel == "capture.json" || rel == "timings.csv") continue;
+    if (rel.parent_path() == "frames" && rel.extension() == ".json") {
+      EXPECT_EQ(without_times(ReadJsonFile(e.path())), without_times(ReadJsonFile(other))) << rel;
+    } else {
+      EXPECT_EQ(ReadFileToString(e.path()), ReadFileToString(other)) << rel;
+    }
+    ++compared;
+  }
+  EXPECT_GE(compared, 5 * 3 + 4 + 4);  // frames (.json, .cfr, the meshes), D^t and T^t of the tracked ones
 }
 
 // A source without frames is an error naming the input, and leaves no folder behind.

@@ -27,7 +27,7 @@ struct CaptureArgs {
   TrackingFlags tf;
   std::string model_path, out, preview, config;
   int mesh_every = 1;
-  bool no_meshes = false, no_maps = false, write_textures = false, overwrite = false;
+  bool no_meshes = false, no_maps = false, write_textures = false, overwrite = false, serial = false;
   std::vector<std::string> sets;
 };
 
@@ -57,6 +57,7 @@ void RunCaptureCommand(const CaptureArgs& a) {
   run.write_meshes = !a.no_meshes;
   run.write_maps = !a.no_maps;
   run.write_textures = a.write_textures;
+  run.overlap_frames = !a.serial;
   const CaptureSummary summary =
       CaptureFromFiles(files, options, run, [](const std::string& line) { std::printf("%s\n", line.c_str()); });
   std::printf("%s", summary.BriefReport().c_str());
@@ -83,6 +84,9 @@ void AddCaptureCommand(CLI::App& app) {
   cmd->add_option("--config", a->config, "YAML of capture options (pipeline/capture/capture.h CaptureOptions)");
   cmd->add_option("--set", a->sets, "Capture option KEY=VALUE (repeatable), e.g. detail.wrinkle_frames=20 refine=false");
   cmd->add_flag("--overwrite", a->overwrite, "Replace an existing output folder");
+  cmd->add_flag("--serial", a->serial,
+                "One frame after another instead of overlapping frame t+1's tracking and texture with frame t's detail "
+                "(the same outputs; each stage's time alone)");
   cmd->callback([a] { RunCaptureCommand(*a); });
 }
 

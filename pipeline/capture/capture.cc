@@ -109,6 +109,61 @@ bool CaptureSession::layout_fixed() const { return detail_->layout_fixed(); }
 
 std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& frame, const TrackedFrame& tracked,
                                                    const Eigen::VectorXd& identity) {
+  std::vector<CapturedFrame> done = Begin(index, frame, tracked, identity);
+  for (CapturedFrame& f : done) Finish(&f);
+  return done;
+}
+
+// Begin's work on a tracked frame: L~^t, T^t (blended over time) and, on the first
+// textured frame, D^HF.
+void CaptureSession::BeginTracked(const cv::Mat& frame, const TrackedFrame& tracked, const Eigen::VectorXd& identity,
+                                  CapturedFrame* out_frame) {
+  CapturedFrame& out = *out_frame;
+  if (refiner_) {
+    // Visibility of the flow points: from the previous frame's depth buffer of
+    // L~^{t−1} (the texture's, free) while tracking continues; a depth buffer of
+    // L^t on the first frame and after a loss. L^t itself is evaluated by the
+    // refiner (RefinedFrame::coarse_vertices); it is evaluated here only when
+    // the visibility needs it first.
+    auto t0 = std::chrono::steady_clock::now();
+    if (!was_tracked_ || previous_visible_.size() != static_cast<size_t>(rig_.num_vertices())) {
+      out.coarse = CameraVertices(rig_, identity, tracked.fit);
+      previous_visible_ = texture_->VisibleVertices(out.coarse);
+    }
+    out.timing.visibility_ms = MsSince(t0);
+    t0 = std::chrono::steady_clock::now();
+    out.refinement = refiner_->Refine(ToGray8(frame), tracked, identity, previous_visible_);
+    out.timing.refine_ms = MsSince(t0);
+    if (out.refinement.coarse_vertices.rows() == rig_.num_vertices()) {
+      out.coarse = out.refinement.coarse_vertices;
+    } else if (out.coarse.rows() != rig_.num_vertices()) {
+      out.coarse = CameraVertices(rig_, identity, tracked.fit);
+    }
+    out.refined = out.refinement.vertices.rows() == out.coarse.rows() ? out.refinement.vertices : out.coarse;
+  } else {
+    out.coarse = CameraVertices(rig_, identity, tracked.fit);
+    out.refined = out.coarse;
+  }
+  auto t0 = std::chrono::steady_clock::now();
+  texture_->Extract(out.refined, frame, &out.texture, &previous_visible_);
+  if (options_.texture.temporal_weight > 0) {
+    BlendTextureHistory(options_.texture.temporal_weight, &out.texture, &texture_history_);
+  }
+  out.timing.texture_ms = MsSince(t0);
+  out.has_mesh = true;
+  if (mesoscopic_.empty()) {
+    t0 = std::chrono::steady_clock::now();
+    if (options_.mesoscopic_detail) {
+      mesoscopic_ = MesoscopicMap(out.texture.gray, out.texture.seen, options_.mesoscopic);
+    } else {
+      mesoscopic_ = cv::Mat::zeros(map_resolution_, map_resolution_, CV_32F);
+    }
+    out.timing.mesoscopic_ms = MsSince(t0);
+  }
+}
+
+std::vector<CapturedFrame> CaptureSession::Begin(int index, const cv::Mat& frame, const TrackedFrame& tracked,
+                                                 const Eigen::VectorXd& identity) {
   Require(!frame.empty(), fmt::format("capture: frame {} is empty", index));
   Require(frame.cols == intrinsics_.width && frame.rows == intrinsics_.height,
           fmt::format("capture: frame {} is {}×{} but the camera is {}×{}", index, frame.cols, frame.rows,
@@ -119,47 +174,7 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
   out.timing.landmarks_ms = tracked.landmarks_ms;
   out.timing.fit_ms = tracked.fit_ms;
   if (tracked.tracked) {
-    if (refiner_) {
-      // Visibility of the flow points: from the previous frame's depth buffer of
-      // L~^{t−1} (the texture's, free) while tracking continues; a depth buffer of
-      // L^t on the first frame and after a loss. L^t itself is evaluated by the
-      // refiner (RefinedFrame::coarse_vertices); it is evaluated here only when
-      // the visibility needs it first.
-      auto t0 = std::chrono::steady_clock::now();
-      if (!was_tracked_ || previous_visible_.size() != static_cast<size_t>(rig_.num_vertices())) {
-        out.coarse = CameraVertices(rig_, identity, tracked.fit);
-        previous_visible_ = texture_->VisibleVertices(out.coarse);
-      }
-      out.timing.visibility_ms = MsSince(t0);
-      t0 = std::chrono::steady_clock::now();
-      out.refinement = refiner_->Refine(ToGray8(frame), tracked, identity, previous_visible_);
-      out.timing.refine_ms = MsSince(t0);
-      if (out.refinement.coarse_vertices.rows() == rig_.num_vertices()) {
-        out.coarse = out.refinement.coarse_vertices;
-      } else if (out.coarse.rows() != rig_.num_vertices()) {
-        out.coarse = CameraVertices(rig_, identity, tracked.fit);
-      }
-      out.refined = out.refinement.vertices.rows() == out.coarse.rows() ? out.refinement.vertices : out.coarse;
-    } else {
-      out.coarse = CameraVertices(rig_, identity, tracked.fit);
-      out.refined = out.coarse;
-    }
-    auto t0 = std::chrono::steady_clock::now();
-    texture_->Extract(out.refined, frame, &out.texture, &previous_visible_);
-    if (options_.texture.temporal_weight > 0) {
-      BlendTextureHistory(options_.texture.temporal_weight, &out.texture, &texture_history_);
-    }
-    out.timing.texture_ms = MsSince(t0);
-    out.has_mesh = true;
-    if (mesoscopic_.empty()) {
-      t0 = std::chrono::steady_clock::now();
-      if (options_.mesoscopic_detail) {
-        mesoscopic_ = MesoscopicMap(out.texture.gray, out.texture.seen, options_.mesoscopic);
-      } else {
-        mesoscopic_ = cv::Mat::zeros(map_resolution_, map_resolution_, CV_32F);
-      }
-      out.timing.mesoscopic_ms = MsSince(t0);
-    }
+    BeginTracked(frame, tracked, identity, &out);
   } else {
     if (refiner_) refiner_->Reset();
     texture_history_ = FrameTexture();  // a lost face: nothing to blend the next texture with
@@ -168,7 +183,6 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
 
   std::vector<CapturedFrame> done;
   if (detail_->layout_fixed()) {
-    RegressAndFinish(&out);
     done.push_back(std::move(out));
     return done;
   }
@@ -185,11 +199,17 @@ std::vector<CapturedFrame> CaptureSession::Process(int index, const cv::Mat& fra
     out.timing.wrinkle_map_ms = MsSince(t0);
   }
   pending_.push_back(std::move(out));
-  if (detail_->frames_added() >= options_.detail.wrinkle_frames) done = Flush();
+  if (detail_->frames_added() >= options_.detail.wrinkle_frames) done = EndInput();
   return done;
 }
 
 std::vector<CapturedFrame> CaptureSession::Flush() {
+  std::vector<CapturedFrame> done = EndInput();
+  for (CapturedFrame& f : done) Finish(&f);
+  return done;
+}
+
+std::vector<CapturedFrame> CaptureSession::EndInput() {
   std::vector<CapturedFrame> done;
   if (pending_.empty()) return done;
   if (!detail_->layout_fixed()) {
@@ -205,15 +225,13 @@ std::vector<CapturedFrame> CaptureSession::Flush() {
     detail_->FixLayout();
   }
   while (!pending_.empty()) {
-    CapturedFrame f = std::move(pending_.front());
+    done.push_back(std::move(pending_.front()));
     pending_.pop_front();
-    RegressAndFinish(&f);
-    done.push_back(std::move(f));
   }
   return done;
 }
 
-void CaptureSession::RegressAndFinish(CapturedFrame* frame) {
+void CaptureSession::Finish(CapturedFrame* frame) {
   if (!frame->has_mesh) return;
   auto t0 = std::chrono::steady_clock::now();
   if (options_.regress_detail && !options_.detail_from_truth_maps.empty()) {

@@ -141,11 +141,28 @@ class CaptureSession {
   // the frames completed by this call, in order: nothing while the wrinkle map is
   // being built (the first N frames), then those N frames at once, then one frame
   // per call.
+  // Process = Begin, then Finish on each frame it returns.
   std::vector<CapturedFrame> Process(int index, const cv::Mat& frame, const TrackedFrame& tracked,
                                      const Eigen::VectorXd& identity);
   // Fixes the layout if it is not yet fixed (input shorter than N frames) and
-  // returns the buffered frames.
+  // returns the buffered frames, finished.
   std::vector<CapturedFrame> Flush();
+
+  // The two halves of Process, for a capture that overlaps frames (RunCapture):
+  // Begin does the per-frame work that carries state from frame to frame (the flow
+  // refinement L~^t, the texture T^t and its blend over time, visibility, D^HF of
+  // the first frame, the wrinkle map of the first N frames) and returns the frames
+  // ready for Finish, in order, as Process would return them; Finish does the rest
+  // (D^t, Sec. 5.2, and H^t, Sec. 5.3). Begin(t + 1) may run concurrently with
+  // Finish of frames an earlier Begin returned: the two touch disjoint state (Finish
+  // only reads D^HF and the layout, which Begin fixes before it returns a first
+  // frame). Calls of Begin, and calls of Finish, must each be in frame order. The
+  // results are those of Process, byte for byte.
+  std::vector<CapturedFrame> Begin(int index, const cv::Mat& frame, const TrackedFrame& tracked,
+                                   const Eigen::VectorXd& identity);
+  void Finish(CapturedFrame* frame);
+  // Flush's Begin half: the buffered frames, the layout fixed, not yet finished.
+  std::vector<CapturedFrame> EndInput();
 
   // H^t of a completed frame (built anew).
   TriMesh HifiMesh(const CapturedFrame& frame) const;
@@ -162,7 +179,8 @@ class CaptureSession {
   const CaptureOptions& options() const { return options_; }
 
  private:
-  void RegressAndFinish(CapturedFrame* frame);
+  void BeginTracked(const cv::Mat& frame, const TrackedFrame& tracked, const Eigen::VectorXd& identity,
+                    CapturedFrame* out);
 
   FaceRig rig_;
   CaptureOptions options_;

@@ -1,7 +1,9 @@
 // Running and recording a capture (paper Sec. 5): the job `crease capture` runs,
 // callable from C++. Frames from a FrameSource go through a global tracker (L^t)
 // and a CaptureSession (L~^t, T^t, D^t, H^t), and every frame the session returns
-// is written to one output folder (docs/formats.md describes it):
+// is written to one output folder (docs/formats.md describes it). By default frame
+// t+1's tracking, refinement and texture run beside frame t's detail regression and
+// H^t (CaptureRunOptions::overlap_frames), with the serial order's outputs:
 //   capture.json                the CaptureSummary (CaptureSummary::ToJson)
 //   timings.csv                 per-frame stage times, ms
 //   rig.crig                    the rig captured with (the session's, model-compatible)
@@ -60,6 +62,12 @@ struct CaptureRunOptions {
   bool write_meshes = true;    // per-frame PLY/VTP meshes L^t, L~^t, H^t
   bool write_maps = true;      // per-frame displacement maps D^t (EXR)
   bool write_textures = false;  // per-frame textures T^t (PNG)
+  // Overlap frames on the cores (not in the paper, which runs on a GPU): frame t+1's
+  // tracking, flow refinement and texture (CaptureSession::Begin) run beside frame
+  // t's detail regression and H^t (CaptureSession::Finish). The outputs are those
+  // of the serial order, byte for byte; the speed is then the wall clock per frame.
+  // false: one frame after another (each stage's time alone).
+  bool overlap_frames = true;
   // Provenance, recorded in capture.json as given.
   std::string input;           // the frames' path
   std::string model_path;      // the detail model's file
@@ -88,9 +96,13 @@ struct CaptureSummary {
   int wrinkle_frames = 0;                // frames in the wrinkle map (the first N, Sec. 5.2)
 
   // Speed in the steady state: frames with D^t, no detection, not the first
-  // textured frame; file I/O excluded.
+  // textured frame; file I/O excluded. With overlapped frames the wall clock of the
+  // steps that finished one such frame while beginning a tracked, undetected one (or
+  // none, at the end); else each frame's stage times summed.
+  bool overlapped = false;      // CaptureRunOptions::overlap_frames
   int steady_frames = 0;
   double ms_per_frame = 0.0;    // 0 without steady frames
+  double stage_ms_per_frame = 0.0;  // the steady frames' stage times summed (= ms_per_frame when not overlapped)
   double fps = 0.0;             // 1000 / ms_per_frame; 0 without steady frames (paper: 18 fps, Sec. 6)
   double tracking_share = 0.0;  // of the steady time: landmarks, rig fit, visibility, flow refinement (paper: 58 %)
   double detail_share = 0.0;    // texture, mesoscopic, detail regression, H^t (paper: 42 %)
