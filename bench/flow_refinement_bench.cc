@@ -124,10 +124,38 @@ FlowRefinementOptions Sparser() {
   o.flow_point_spacing_mm = kSpacingMm;
   return o;
 }
+// The anchored refinement (detail-levers' gated-level-anchored: the pure chain, the
+// reference frame blended in at gain 0.3, the Laplacian following the flow points),
+// at 9 mm and at 3.5 mm between flow points (-dense). Idle 2-vCPU AMD EPYC,
+// 2026-12-06, two runs: defaults 4.2 ms; anchored 4.5 / 4.9 ms; anchored_dense 20.3 /
+// 15.7 ms (flow 15.3 / 11.7, 3D fit 3.7 / 3.0; 1,333 visible points against 255).
+template <int kSpacingTenthsMm>
+FlowRefinementOptions Anchored() {
+  FlowRefinementOptions o;
+  o.flow_pull_adaptive = false;
+  o.flow_tracker_pull = 0.0;
+  o.flow_reference_frame = true;
+  o.flow_reference_gain = 0.3;
+  o.laplacian_flow_weight = 10.0;
+  o.flow_point_spacing_mm = kSpacingTenthsMm / 10.0;
+  return o;
+}
+// The dense anchored refinement with a smaller LK window (same run: 15 px 13.6 ms,
+// 11 px 8.8 ms, flow 5.2 ms; detail-levers' gated-level-anchored-dense uses 11).
+template <int kWindow>
+FlowRefinementOptions AnchoredDenseWindow() {
+  FlowRefinementOptions o = Anchored<35>();
+  o.lk_window = kWindow;
+  return o;
+}
 BENCHMARK_CAPTURE(BM_Refine, defaults, Defaults())->Arg(1)->Arg(0)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Refine, two_levels_predicted, TwoLevels())->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Refine, spacing_10mm, Sparser<10>())->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Refine, spacing_11mm, Sparser<11>())->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Refine, anchored, Anchored<90>())->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Refine, anchored_dense, Anchored<35>())->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Refine, anchored_dense_window_15, AnchoredDenseWindow<15>())->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Refine, anchored_dense_window_11, AnchoredDenseWindow<11>())->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // Construction: flow points, geodesic neighbours, Laplacian factorisation (once per sequence).
 void BM_Construct(benchmark::State& state) {
