@@ -178,6 +178,7 @@ void WriteVtp(const fs::path& path, const TriMesh& mesh, const std::vector<Verte
     if (binary) {
       writer->SetDataModeToAppended();
       writer->EncodeAppendedDataOff();
+      writer->SetCompressorTypeToLZ4();
     } else {
       writer->SetDataModeToAscii();
     }
