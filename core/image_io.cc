@@ -207,6 +207,40 @@ void Encode(OIIO::ImageOutput& out, const std::string& name, const OIIO::ImageSp
 }
 }  // namespace
 
+namespace {
+
+// An 8- or 16-bit image's pixels as linear float, alpha kept: each code's value is
+// OIIO's own conversion to float (what read_image would give), sRGB-decoded once
+// into a table instead of once per pixel; the same floats as decoding every pixel.
+template <typename T>
+cv::Mat ReadSrgbIntegerImage(OIIO::ImageInput* in, const fs::path& path) {
+  const OIIO::ImageSpec& spec = in->spec();
+  const int w = spec.width, h = spec.height, c = spec.nchannels;
+  const OIIO::TypeDesc type = OIIO::BaseTypeFromC<T>::value;
+  std::vector<T> codes(static_cast<size_t>(w) * h * c);
+  if (!in->read_image(0, 0, 0, c, type, codes.data())) {
+    const std::string err = in->geterror();
+    throw Error(fmt::format("{}: cannot decode image data: {}", path.string(), err));
+  }
+  const size_t levels = size_t{std::numeric_limits<T>::max()} + 1;
+  std::vector<float> linear(levels), alpha(levels);
+  for (size_t k = 0; k < levels; ++k) {
+    const T code = static_cast<T>(k);
+    OIIO::convert_pixel_values(type, &code, OIIO::TypeDesc::FLOAT, &alpha[k], 1);
+    linear[k] = SrgbToLinear(alpha[k]);
+  }
+  const int color_channels = std::min(c, 3);  // alpha stays linear
+  cv::Mat img(h, w, CV_32FC(c));
+  for (int y = 0; y < h; ++y) {
+    float* row = img.ptr<float>(y);
+    const T* src = codes.data() + static_cast<size_t>(y) * w * c;
+    for (int i = 0; i < w * c; ++i) row[i] = (i % c < color_channels ? linear : alpha)[src[i]];
+  }
+  return img;
+}
+
+}  // namespace
+
 cv::Mat ReadImage(const fs::path& path, bool srgb) {
   RequireReadableFile(path);
   CheckHeaderBeforeDecoding(path);
@@ -221,6 +255,9 @@ cv::Mat ReadImage(const fs::path& path, bool srgb) {
                             w, h, c));
   }
   CheckImageSize(path, "the header", w, h);
+  const bool uniform = spec.channelformats.empty();
+  if (srgb && uniform && spec.format == OIIO::TypeDesc::UINT8) return ReadSrgbIntegerImage<uint8_t>(in.get(), path);
+  if (srgb && uniform && spec.format == OIIO::TypeDesc::UINT16) return ReadSrgbIntegerImage<uint16_t>(in.get(), path);
   cv::Mat img(h, w, CV_32FC(c));
   if (!in->read_image(0, 0, 0, c, OIIO::TypeDesc::FLOAT, img.data)) {
     const std::string err = in->geterror();

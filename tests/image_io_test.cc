@@ -9,6 +9,7 @@
 #include <thread>
 #include <csignal>
 #include <sys/resource.h>
+#include <fmt/format.h>
 #include <opencv2/core.hpp>
 
 #include "core/error.h"
@@ -61,6 +62,34 @@ TEST(ImageIo, ExrPngRoundTripsSrgbAndErrors) {
   const cv::Mat back = ReadImage(dir / "codes.png");
   for (int i = 0; i < 256; ++i) {
     EXPECT_EQ(cvRound(LinearToSrgb(back.at<float>(0, i)) * 255.0f), i);
+  }
+  // The sRGB decode of 8- and 16-bit files (one table per code) gives exactly the
+  // floats of decoding each pixel read as data; alpha stays linear.
+  for (const int bits : {8, 16}) {
+    cv::Mat rgba(3, 256, CV_32FC4);
+    Rng rng(bits);
+    for (int y = 0; y < rgba.rows; ++y) {
+      for (int x = 0; x < rgba.cols; ++x) {
+        for (int k = 0; k < 4; ++k) rgba.at<cv::Vec4f>(y, x)[k] = static_cast<float>(rng.Uniform(0.0, 1.0));
+      }
+    }
+    rgba.at<cv::Vec4f>(0, 0) = cv::Vec4f(0, 0, 0, 0);
+    rgba.at<cv::Vec4f>(0, 1) = cv::Vec4f(1, 1, 1, 1);
+    const fs::path p = dir / fmt::format("rgba{}.png", bits);
+    WriteImage(p, rgba, {.srgb = false, .bits = bits});
+    const cv::Mat decoded = ReadImage(p), data = ReadImage(p, /*srgb=*/false);
+    ASSERT_EQ(decoded.type(), CV_32FC4);
+    int differ = 0;
+    for (int y = 0; y < data.rows; ++y) {
+      for (int x = 0; x < data.cols; ++x) {
+        const cv::Vec4f d = data.at<cv::Vec4f>(y, x), e = decoded.at<cv::Vec4f>(y, x);
+        for (int k = 0; k < 3; ++k) differ += e[k] != SrgbToLinear(d[k]);
+        differ += e[3] != d[3];
+      }
+    }
+    EXPECT_EQ(differ, 0) << bits << " bits";
+    EXPECT_EQ(decoded.at<cv::Vec4f>(0, 1)[0], 1.0f);
+    EXPECT_GT(data.at<cv::Vec4f>(2, 5)[0], decoded.at<cv::Vec4f>(2, 5)[0]);  // decoded: darker mid-tones
   }
   // Linear (data) PNG keeps value·255.
   cv::Mat mask(4, 4, CV_32FC1, cv::Scalar(0.0f));
