@@ -205,9 +205,6 @@ void Encode(OIIO::ImageOutput& out, const std::string& name, const OIIO::ImageSp
     throw Error(fmt::format("{}: write failed: {}", path.string(), out.geterror()));
   }
 }
-}  // namespace
-
-namespace {
 
 // An 8- or 16-bit image's pixels as linear float, alpha kept: each code's value is
 // OIIO's own conversion to float (what read_image would give), sRGB-decoded once

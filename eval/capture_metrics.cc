@@ -182,6 +182,20 @@ void Divide(int n, SurfaceError* s) {
 }
 
 // The dataset's per-frame expression displacement file (synth/dataset.h).
+// The still face's pair counts and, where there are pairs, its correlations (else
+// not measured: absent, never a misleading 0).
+void AddStillFaceJson(const CaptureEvalSummary& s, json* d) {
+  (*d)["still_pairs"] = s.still_pairs;
+  (*d)["still_active_pairs"] = s.still_active_pairs;
+  (*d)["still_inactive_pairs"] = s.still_inactive_pairs;
+  if (s.still_pairs > 0) {
+    (*d)["still_correlation"] = s.d_still_correlation;
+    (*d)["still_pooled_correlation"] = s.d_still_pooled_correlation;
+  }
+  if (s.still_active_pairs > 0) (*d)["still_active_correlation"] = s.d_still_active_correlation;
+  if (s.still_inactive_pairs > 0) (*d)["still_inactive_correlation"] = s.d_still_inactive_correlation;
+}
+
 }  // namespace
 
 bool BestVerticalOffset(const cv::Mat& D, const cv::Mat& G, const cv::Mat& mask, int max_shift, int* shift,
@@ -1564,24 +1578,6 @@ CaptureEvalSummary EvaluateCapture(const fs::path& capture, const fs::path& data
   for (int index : context.frames) per_frame.push_back(EvaluateFrame(context, index, &state));
   return ReduceSummary(context, state, std::move(per_frame));
 }
-
-namespace {
-
-// The still face's pair counts and, where there are pairs, its correlations (else
-// not measured: absent, never a misleading 0).
-void AddStillFaceJson(const CaptureEvalSummary& s, json* d) {
-  (*d)["still_pairs"] = s.still_pairs;
-  (*d)["still_active_pairs"] = s.still_active_pairs;
-  (*d)["still_inactive_pairs"] = s.still_inactive_pairs;
-  if (s.still_pairs > 0) {
-    (*d)["still_correlation"] = s.d_still_correlation;
-    (*d)["still_pooled_correlation"] = s.d_still_pooled_correlation;
-  }
-  if (s.still_active_pairs > 0) (*d)["still_active_correlation"] = s.d_still_active_correlation;
-  if (s.still_inactive_pairs > 0) (*d)["still_inactive_correlation"] = s.d_still_inactive_correlation;
-}
-
-}  // namespace
 
 std::string CaptureEvalSummary::ToJson() const {
   json j;

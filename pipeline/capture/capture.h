@@ -166,8 +166,6 @@ class CaptureSession {
 
   // H^t of a completed frame (built anew).
   TriMesh HifiMesh(const CapturedFrame& frame) const;
-  // H^t of the frame completed last (valid when build_hifi_mesh; reused buffer).
-  const TriMesh& last_hifi_mesh() const { return hifi_scratch_; }
   // The combined map D^t + D^HF of a frame (what displaces H^t).
   cv::Mat CombinedDisplacement(const CapturedFrame& frame) const;
 

@@ -1,6 +1,7 @@
 #include "pipeline/capture/capture_run.h"
 
 #include <algorithm>
+#include <functional>
 #include <map>
 #include <memory>
 #include <utility>
@@ -405,8 +406,14 @@ int RunFramesInOrder(const CaptureRunOptions& options, FrameSource* frames, Glob
 int RunFramesOverlapped(const CaptureRunOptions& options, FrameSource* frames, GlobalTracker* tracker,
                         CaptureSession* session, CaptureRecorder* recorder, Progress* progress) {
   std::vector<CapturedFrame> ready;  // begun, to finish in the next step
-  const auto finish_ready = [&] {
-    for (CapturedFrame& f : ready) session->Finish(&f);
+  // One step: `begin` beside the Finish of `ready`, timed; then `ready` is recorded.
+  const auto step = [&](const std::function<void()>& begin, const TrackedFrame* begun) {
+    const ScopedTimer timer(nullptr, "");
+    tbb::parallel_invoke(begin, [&] {
+      for (CapturedFrame& f : ready) session->Finish(&f);
+    });
+    recorder->AddStep(1e3 * timer.Elapsed(), ready, begun);
+    for (const CapturedFrame& f : ready) recorder->Record(f);
   };
   cv::Mat frame;
   int n = 0;
@@ -415,24 +422,18 @@ int RunFramesOverlapped(const CaptureRunOptions& options, FrameSource* frames, G
     recorder->Keep(index, frame);
     TrackedFrame t;
     std::vector<CapturedFrame> begun;
-    const ScopedTimer step(nullptr, "");
-    tbb::parallel_invoke(
+    step(
         [&] {
           t = tracker->Track(frame, index);
           begun = session->Begin(index, frame, t, tracker->identity());
         },
-        finish_ready);
-    recorder->AddStep(1e3 * step.Elapsed(), ready, &t);
-    for (const CapturedFrame& f : ready) recorder->Record(f);
+        &t);
     ready = std::move(begun);
     ++n;
     progress->Advance();
   }
   for (CapturedFrame& f : session->EndInput()) ready.push_back(std::move(f));
-  const ScopedTimer step(nullptr, "");
-  finish_ready();
-  recorder->AddStep(1e3 * step.Elapsed(), ready, nullptr);
-  for (const CapturedFrame& f : ready) recorder->Record(f);
+  step([] {}, nullptr);
   return n;
 }
 
