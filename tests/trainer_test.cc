@@ -187,6 +187,32 @@ TEST(Trainer, SavedPairsRetrainTheSameRegressorAndRefuseOtherExtraction) {
   EXPECT_THROW(ReadTrainingPairs(dir / "cut.cpr"), Error);
 }
 
+// TrainingOptions::target_band_mm: the same pairs (layout and textures), but targets
+// cut from D^j's wrinkle band, which keeps the lines and drops the broad shape: a
+// patch's own mean (its smoothest content) then holds a small share of its energy.
+TEST(Trainer, TargetsInTheWrinkleBandKeepThePairsAndDropTheBroadShape) {
+  const ScanSet set = ReadScanSet(TinyScans());
+  TrainingOptions o = TinyTrainingOptions();
+  const TrainingPairs raw = ExtractTrainingPairs(set, Rig(), o, {}, nullptr);
+  o.target_band_mm = 2.0;
+  const TrainingPairs band = ExtractTrainingPairs(set, Rig(), o, {}, nullptr);
+  ASSERT_GT(raw.texture.rows(), 10);
+  ASSERT_EQ(band.texture.rows(), raw.texture.rows());
+  EXPECT_EQ(band.texture, raw.texture);
+  auto mean_share = [](const Eigen::MatrixXf& d) {
+    const Eigen::VectorXf means = d.rowwise().mean();
+    return means.squaredNorm() / (d.squaredNorm() / d.cols());
+  };
+  const double raw_share = mean_share(raw.displacement), band_share = mean_share(band.displacement);
+  std::printf("patch means' share of the targets' energy: D^j %.3f, its wrinkle band %.3f\n", raw_share, band_share);
+  EXPECT_LT(band_share, 0.5 * raw_share);
+  // The lines stay: the band targets keep a fair part of D^j's energy.
+  EXPECT_GT(band.displacement.squaredNorm(), 0.05 * raw.displacement.squaredNorm());
+  // An extraction option: saved pairs refuse it.
+  EXPECT_ERROR_HAS(OptionsForPairs(raw, "raw.cpr", [](TrainingOptions* t) { t->target_band_mm = 2.0; }),
+                   "target_band_mm");
+}
+
 TEST(Trainer, BadScanSets) {
   const fs::path dir = testing::TestDir();
   EXPECT_ERROR_HAS(ReadScanSet(dir / "missing"), "not a folder");

@@ -43,6 +43,7 @@ void TrainingOptions::VisitFields(OptionVisitor& v) {
   v.Field("validation_band_mm", validation_band_mm);
   v.Field("pair_shift_texels", pair_shift_texels);
   v.Field("pair_shift_steps", pair_shift_steps);
+  v.Field("target_band_mm", target_band_mm);
 }
 
 void TrainingOptions::Check() const {
@@ -58,6 +59,8 @@ void TrainingOptions::Check() const {
   CheckGe("TrainingOptions", "max_actors", max_actors, 0);
   CheckGe("TrainingOptions", "validation_band_mm", validation_band_mm, 0.0);
   CheckGe("TrainingOptions", "pair_shift_steps", pair_shift_steps, 0);
+  CheckGe("TrainingOptions", "target_band_mm", target_band_mm, 0.0);
+  CheckLe("TrainingOptions", "target_band_mm", target_band_mm, 100.0);
   Require(std::isfinite(pair_shift_texels) && pair_shift_texels > 0,
           fmt::format("TrainingOptions.pair_shift_texels = {} must be finite and > 0", pair_shift_texels));
 }
@@ -388,6 +391,11 @@ cv::Mat ScanDisplacement(const ExtractionContext& ctx, const std::string& actor,
     Require(!scan.truth_displacement.empty() && !neutral_truth.empty(),
             fmt::format("{}: training_targets = truth needs the scan set's ground truth (a studio scan set)", name));
     D = ReadTruth(scan.truth_displacement, R) - neutral_truth;
+  }
+  if (ctx.options.target_band_mm > 0.0) {
+    cv::Mat mask;
+    cv::bitwise_and(extractor.coverage(), detail.valid, mask);
+    D = WrinkleBand(D, mask, ctx.options.target_band_mm / mm_per_texel);
   }
   if (!scan.truth_displacement.empty() && !neutral_truth.empty()) {
     cv::Mat truth = ReadTruth(scan.truth_displacement, R) - neutral_truth;
