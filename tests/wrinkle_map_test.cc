@@ -177,6 +177,29 @@ TEST(WrinkleMapTest, BuilderMatchesDefinitionAndAngleFollowsLines) {
   }
 }
 
+// orientation_reference_deg (Difference 7): the same axis across the line, its sign
+// chosen so that e1 has a non-negative component along φ_0; 90° is the default's
+// θ ∈ [0°, 180°) to the bit.
+TEST(WrinkleMapTest, OrientationReferenceChoosesTheSignOfE1) {
+  const int S = 128, c = S / 2;
+  for (double line_deg : {0.0, 30.0, 75.0, 135.0, 170.0}) {
+    SCOPED_TRACE(line_deg);
+    const std::vector<cv::Mat> textures = {LineTexture(S, line_deg)};
+    WrinkleMapOptions o = TexelOptions();
+    const WrinkleMap base = ComputeWrinkleMap(textures, cv::Mat(), {}, o);
+    o.orientation_reference_deg = 90.0;
+    EXPECT_EQ(cv::norm(ComputeWrinkleMap(textures, cv::Mat(), {}, o).angle, base.angle, cv::NORM_INF), 0.0);
+    for (double phi : {0.0, 45.0, 135.0, -100.0}) {
+      o.orientation_reference_deg = phi;
+      const double a = ComputeWrinkleMap(textures, cv::Mat(), {}, o).angle.at<float>(c, c);
+      EXPECT_GE(a, 0.0);
+      EXPECT_LT(a, 2.0 * kPi);
+      EXPECT_LT(AngleDiffMod180(a * 180.0 / kPi, base.angle.at<float>(c, c) * 180.0 / kPi), 1e-3);
+      EXPECT_GE(std::cos(a - phi * kPi / 180.0), -1e-6) << "phi " << phi << " angle " << a * 180.0 / kPi;
+    }
+  }
+}
+
 TEST(WrinkleMapTest, CurvedLineOrientationAlongItsLength) {
   // A dark circle of radius 40: at every point of it the angle is radial.
   const int S = 128;

@@ -27,6 +27,7 @@ void WrinkleMapOptions::VisitFields(OptionVisitor& v) {
   v.Field("patch_exclude_margin", patch_exclude_margin);
   v.Field("orientation_gradient_sigma", orientation_gradient_sigma);
   v.Field("orientation_smoothing_sigma", orientation_smoothing_sigma);
+  v.Field("orientation_reference_deg", orientation_reference_deg);
   v.Field("texture_reference", texture_reference);
   v.Field("texture_reference_level", texture_reference_level);
 }
@@ -44,6 +45,8 @@ void WrinkleMapOptions::Check() const {
   CheckGe(o, "patch_exclude_margin", patch_exclude_margin, 0.0);
   CheckLe(o, "patch_exclude_margin", patch_exclude_margin, 1000.0);
   CheckLe(o, "orientation_smoothing_sigma", orientation_smoothing_sigma, 1000.0);
+  CheckGe(o, "orientation_reference_deg", orientation_reference_deg, -360.0);
+  CheckLe(o, "orientation_reference_deg", orientation_reference_deg, 360.0);
   CheckGe(o, "texture_reference_level", texture_reference_level, 0.0);
   Require(texture_reference_level == 0.0 || texture_reference != TextureReference::kNone,
           fmt::format("{}: texture_reference_level = {} needs texture_reference ratio or difference (it sets the "
@@ -102,6 +105,24 @@ void RequireGray(const cv::Mat& image, const std::string& what) {
                       what, image.type(), image.channels()));
   Require(image.rows == image.cols,
           fmt::format("{}: texture is {}x{}, expected a square UV map", what, image.cols, image.rows));
+}
+
+// θ of a patch from the averaged doubled-angle vector o: ½ atan2(o_y, o_x), plus π
+// where needed so that θ ∈ [φ_0 − π/2, φ_0 + π/2) (Difference 7), as a float in
+// [0, 2π). With φ_0 = π/2 this is crease's θ ∈ [0, π) to the bit.
+float PatchAngle(const cv::Vec2f& o, double phi0) {
+  constexpr double kPi = std::numbers::pi;
+  double t = 0.5 * std::atan2(static_cast<double>(o[1]), static_cast<double>(o[0]));
+  if (t < 0.0) t += kPi;
+  float tf = static_cast<float>(t);
+  if (tf >= static_cast<float>(kPi)) tf = 0.0f;
+  if (phi0 == 0.5 * kPi) return tf;
+  double a = tf;
+  while (a < phi0 - 0.5 * kPi) a += kPi;
+  while (a >= phi0 + 0.5 * kPi) a -= kPi;
+  a = std::fmod(a, 2.0 * kPi);
+  if (a < 0.0) a += 2.0 * kPi;
+  return static_cast<float>(a);
 }
 
 }  // namespace
@@ -451,6 +472,7 @@ WrinkleMap WrinkleMapBuilder::Finish() const {
   const cv::Mat den = Blur(count_f, sigma_o);
   out.orientation = cv::Mat(size_, size_, CV_32FC2);
   out.angle = cv::Mat(size_, size_, CV_32F);
+  const double phi0 = options_.orientation_reference_deg * std::numbers::pi / 180.0;
   ForRows(size_, [&](int y) {
     const cv::Vec2f* n = num.ptr<cv::Vec2f>(y);
     const float* d = den.ptr<float>(y);
@@ -458,11 +480,7 @@ WrinkleMap WrinkleMapBuilder::Finish() const {
     float* th = out.angle.ptr<float>(y);
     for (int x = 0; x < size_; ++x) {
       o[x] = d[x] > kMinWeight ? cv::Vec2f(n[x][0] / d[x], n[x][1] / d[x]) : cv::Vec2f(0.0f, 0.0f);
-      double t = 0.5 * std::atan2(static_cast<double>(o[x][1]), static_cast<double>(o[x][0]));
-      if (t < 0.0) t += std::numbers::pi;
-      float tf = static_cast<float>(t);
-      if (tf >= static_cast<float>(std::numbers::pi)) tf = 0.0f;
-      th[x] = tf;
+      th[x] = PatchAngle(o[x], phi0);
     }
   });
   return out;

@@ -14,7 +14,7 @@
 // doubled-angle gradient vectors of the contributing texels,
 //   O(p) = G_o * Σ_j [r_j > α] v_j  /  G_o * Σ_j [r_j > α],
 //   v_j  = (g_x² − g_y², 2 g_x g_y),  g = ∇(G_d * T^j),
-// and the patch angle θ(p) = ½ atan2(O_y, O_x) ∈ [0, π) is the direction across
+// and the patch angle θ(p) = ½ atan2(O_y, O_x) + kπ ∈ [φ_0 − π/2, φ_0 + π/2) is the direction across
 // the wrinkle (the gradient direction, in texel coordinates: x = i to the right,
 // y = j downwards, so θ grows clockwise on screen).
 //
@@ -81,6 +81,17 @@
 //        wrinkle band 0.167 / 0.117 / 0.136; against the wrinkle layer alone 0.095 /
 //        0.014 / 0.027. The gain of the patch regression does not reach the
 //        capture, so the default stays the paper's "none".
+//   7. The paper orients a patch along the gradient, which fixes e1 up to its sign.
+//      Under a directional light a groove's dark wall lies on the side away from
+//      the light, so the texture's dark line sits beside the groove, on a side
+//      that only the sign of e1 relative to the light decides. With θ ∈ [0, π)
+//      (φ_0 = 90°) the sign flips between nearly vertical lines leaning either way.
+//      orientation_reference_deg moves that flip to the lines across which a
+//      light along φ_0 casts no asymmetry. Measured (crease 0.4.15, rung R0: seed 1
+//      of detail-levers' gated-level pairs, studio light, key 40° to the side and
+//      30° up; cascade, leave one actor out): φ_0 = 0° 0.295, 45° 0.458, 70° 0.480,
+//      90° 0.488, 110° 0.443, 135° 0.382. The sign matters as much as any lever
+//      measured, and the default is the best of them, so it stays.
 #pragma once
 
 #include <array>
@@ -134,6 +145,11 @@ struct WrinkleMapOptions {
   // σ_o: Gaussian smoothing of the averaged doubled-angle gradient vectors, texels
   // at dog_reference_resolution (not in the paper; Difference 4). 0 = none.
   double orientation_smoothing_sigma = 3.0;
+  // φ_0, degrees in texel coordinates (x right, y down): the patch angle θ is taken
+  // in [φ_0 − 90°, φ_0 + 90°), so that every patch's x axis e1 has a non-negative
+  // component along (cos φ_0, sin φ_0) (not in the paper; Difference 7). 90 = e1
+  // points down the chart, θ ∈ [0°, 180°) (the default, crease's convention).
+  double orientation_reference_deg = 90.0;
   // What the wrinkle map and the patch features read (issue 17; not in the paper,
   // Difference 6): "none" — the texture T itself (the paper); "ratio" — T
   // flattened by a reference texture of the same person under the same light,
