@@ -200,6 +200,26 @@ TEST(WrinkleMapTest, OrientationReferenceChoosesTheSignOfE1) {
   }
 }
 
+// orient_patches = false (Difference 8): one frame for every patch, e1 along φ_0,
+// whatever the lines' orientation; the map itself does not change.
+TEST(WrinkleMapTest, UnorientedPatchesKeepTheReferenceFrame) {
+  const int S = 96;
+  const std::vector<cv::Mat> textures = {LineTexture(S, 30.0), LineTexture(S, 120.0)};
+  WrinkleMapOptions o = TexelOptions();
+  const WrinkleMap oriented = ComputeWrinkleMap(textures, cv::Mat(), {}, o);
+  o.orient_patches = false;
+  for (double phi : {90.0, 20.0, 300.0}) {
+    o.orientation_reference_deg = phi;
+    const WrinkleMap fixed = ComputeWrinkleMap(textures, cv::Mat(), {}, o);
+    EXPECT_EQ(cv::norm(fixed.probability, oriented.probability, cv::NORM_INF), 0.0);
+    double lo = 0.0, hi = 0.0;
+    cv::minMaxLoc(fixed.angle, &lo, &hi);
+    const double want = std::fmod(phi + 360.0, 360.0) * kPi / 180.0;
+    EXPECT_NEAR(lo, want, 1e-5) << "phi " << phi;
+    EXPECT_NEAR(hi, want, 1e-5) << "phi " << phi;
+  }
+}
+
 TEST(WrinkleMapTest, CurvedLineOrientationAlongItsLength) {
   // A dark circle of radius 40: at every point of it the angle is radial.
   const int S = 128;

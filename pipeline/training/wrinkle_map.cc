@@ -28,6 +28,7 @@ void WrinkleMapOptions::VisitFields(OptionVisitor& v) {
   v.Field("orientation_gradient_sigma", orientation_gradient_sigma);
   v.Field("orientation_smoothing_sigma", orientation_smoothing_sigma);
   v.Field("orientation_reference_deg", orientation_reference_deg);
+  v.Field("orient_patches", orient_patches);
   v.Field("texture_reference", texture_reference);
   v.Field("texture_reference_level", texture_reference_level);
 }
@@ -473,6 +474,8 @@ WrinkleMap WrinkleMapBuilder::Finish() const {
   out.orientation = cv::Mat(size_, size_, CV_32FC2);
   out.angle = cv::Mat(size_, size_, CV_32F);
   const double phi0 = options_.orientation_reference_deg * std::numbers::pi / 180.0;
+  const float fixed = PatchAngle(cv::Vec2f(static_cast<float>(std::cos(2.0 * phi0)),
+                                           static_cast<float>(std::sin(2.0 * phi0))), phi0);
   ForRows(size_, [&](int y) {
     const cv::Vec2f* n = num.ptr<cv::Vec2f>(y);
     const float* d = den.ptr<float>(y);
@@ -480,7 +483,7 @@ WrinkleMap WrinkleMapBuilder::Finish() const {
     float* th = out.angle.ptr<float>(y);
     for (int x = 0; x < size_; ++x) {
       o[x] = d[x] > kMinWeight ? cv::Vec2f(n[x][0] / d[x], n[x][1] / d[x]) : cv::Vec2f(0.0f, 0.0f);
-      th[x] = PatchAngle(o[x], phi0);
+      th[x] = options_.orient_patches ? PatchAngle(o[x], phi0) : fixed;
     }
   });
   return out;
