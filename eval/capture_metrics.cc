@@ -181,7 +181,6 @@ void Divide(int n, SurfaceError* s) {
   s->wrinkle_normal_deg /= n;
 }
 
-// The dataset's per-frame expression displacement file (synth/dataset.h).
 // The still face's pair counts and, where there are pairs, its correlations (else
 // not measured: absent, never a misleading 0).
 void AddStillFaceJson(const CaptureEvalSummary& s, json* d) {

@@ -392,15 +392,11 @@ cv::Mat ScanDisplacement(const ExtractionContext& ctx, const std::string& actor,
             fmt::format("{}: training_targets = truth needs the scan set's ground truth (a studio scan set)", name));
     D = ReadTruth(scan.truth_displacement, R) - neutral_truth;
   }
-  if (ctx.options.target_band_mm > 0.0) {
-    cv::Mat mask;
-    cv::bitwise_and(extractor.coverage(), detail.valid, mask);
-    D = WrinkleBand(D, mask, ctx.options.target_band_mm / mm_per_texel);
-  }
+  cv::Mat mask;  // the texels D^j holds
+  cv::bitwise_and(extractor.coverage(), detail.valid, mask);
+  if (ctx.options.target_band_mm > 0.0) D = WrinkleBand(D, mask, ctx.options.target_band_mm / mm_per_texel);
   if (!scan.truth_displacement.empty() && !neutral_truth.empty()) {
     cv::Mat truth = ReadTruth(scan.truth_displacement, R) - neutral_truth;
-    cv::Mat mask;
-    cv::bitwise_and(extractor.coverage(), detail.valid, mask);
     ScanAccuracy acc = CompareWithTruth(ctx, actor, scan.name, detail.displacement, truth, mask, mm_per_texel);
     if (ctx.pictures()) {
       WriteDisplacementPicture(ctx.report_dir, actor, scan.name, detail.displacement, truth, mask,

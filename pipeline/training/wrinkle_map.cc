@@ -108,22 +108,25 @@ void RequireGray(const cv::Mat& image, const std::string& what) {
           fmt::format("{}: texture is {}x{}, expected a square UV map", what, image.cols, image.rows));
 }
 
-// θ of a patch from the averaged doubled-angle vector o: ½ atan2(o_y, o_x), plus π
-// where needed so that θ ∈ [φ_0 − π/2, φ_0 + π/2) (Difference 7), as a float in
-// [0, 2π). With φ_0 = π/2 this is crease's θ ∈ [0, π) to the bit.
+// An angle as a float in [0, 2π).
+float WrapAngle(double a) {
+  a = std::fmod(a, 2.0 * std::numbers::pi);
+  return static_cast<float>(a < 0.0 ? a + 2.0 * std::numbers::pi : a);
+}
+
+// θ of a patch from the averaged doubled-angle vector o: ½ atan2(o_y, o_x) in
+// [0, π), plus or minus π where needed so that θ ∈ [φ_0 − π/2, φ_0 + π/2)
+// (Difference 7), wrapped into [0, 2π). With φ_0 = π/2 nothing is added.
 float PatchAngle(const cv::Vec2f& o, double phi0) {
   constexpr double kPi = std::numbers::pi;
   double t = 0.5 * std::atan2(static_cast<double>(o[1]), static_cast<double>(o[0]));
   if (t < 0.0) t += kPi;
   float tf = static_cast<float>(t);
   if (tf >= static_cast<float>(kPi)) tf = 0.0f;
-  if (phi0 == 0.5 * kPi) return tf;
   double a = tf;
   while (a < phi0 - 0.5 * kPi) a += kPi;
   while (a >= phi0 + 0.5 * kPi) a -= kPi;
-  a = std::fmod(a, 2.0 * kPi);
-  if (a < 0.0) a += 2.0 * kPi;
-  return static_cast<float>(a);
+  return WrapAngle(a);
 }
 
 }  // namespace
@@ -474,8 +477,7 @@ WrinkleMap WrinkleMapBuilder::Finish() const {
   out.orientation = cv::Mat(size_, size_, CV_32FC2);
   out.angle = cv::Mat(size_, size_, CV_32F);
   const double phi0 = options_.orientation_reference_deg * std::numbers::pi / 180.0;
-  const float fixed = PatchAngle(cv::Vec2f(static_cast<float>(std::cos(2.0 * phi0)),
-                                           static_cast<float>(std::sin(2.0 * phi0))), phi0);
+  const float fixed = WrapAngle(phi0);  // orient_patches = false: e1 along φ_0
   ForRows(size_, [&](int y) {
     const cv::Vec2f* n = num.ptr<cv::Vec2f>(y);
     const float* d = den.ptr<float>(y);
