@@ -7,6 +7,7 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/dataset_info.h"
 #include "core/error.h"
@@ -15,6 +16,7 @@
 #include "core/json_io.h"
 #include "core/mesh_io.h"
 #include "core/mesh_ops.h"
+#include "core/picture.h"
 #include "eval/tracking_metrics.h"
 #include "pipeline/training/scan_set.h"
 #include "pipeline/training/wrinkle_map.h"
@@ -77,6 +79,32 @@ Eigen::VectorXd ReadTruthExpression(const FaceRig& rig, const std::filesystem::p
   return ExpressionVector(rig, named);
 }
 
+namespace {
+
+// `dir`/SCAN.exr: the scan's D* (mm); `dir`/SCAN.png: D^j, D* and D^j − D* side by
+// side (top: as they are; bottom: their wrinkle band), half size, on one colour
+// range of three times D*'s RMS (at least 0.02 mm).
+void WriteScanTruth(const std::filesystem::path& dir, const std::string& scan, const cv::Mat& extracted,
+                    const cv::Mat& detail, const cv::Mat& mask, const WrinkleBandMask& band) {
+  std::filesystem::create_directories(dir);
+  WriteImage(dir / (scan + ".exr"), detail);
+  const double rms = CompareMaps(detail, cv::Mat::zeros(detail.size(), CV_32F), mask).extracted_rms_mm;
+  const double range = std::max(0.02, 3.0 * rms);
+  auto row = [&](const cv::Mat& a, const cv::Mat& b) {
+    cv::Mat out;
+    cv::hconcat(std::vector<cv::Mat>{DisplacementPicture(a, range, mask), DisplacementPicture(b, range, mask),
+                                     DisplacementPicture(a - b, range, mask)},
+                out);
+    return out;
+  };
+  cv::Mat picture, half;
+  cv::vconcat(row(extracted, detail), row(WrinkleBand(extracted, band), WrinkleBand(detail, band)), picture);
+  cv::resize(picture, half, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
+  WriteImage(dir / (scan + ".png"), half, {.srgb = false});
+}
+
+}  // namespace
+
 ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, const ExtractionTruthOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   const ScanSet set = ReadScanSet(scans);
@@ -110,6 +138,9 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
       const cv::Mat wrinkles = truth.Wrinkles(beta), band = truth.CoarseBand(beta);
       const cv::Mat detail = wrinkles + band;
       const WrinkleBandMask bm = MakeWrinkleBandMask(mask, sigma);
+      if (!options.write_truth.empty()) {
+        WriteScanTruth(options.write_truth / sa.name, scan.name, d.displacement, detail, mask, bm);
+      }
       const cv::Mat db = WrinkleBand(d.displacement, bm);
       ExtractionTruthRow row;
       row.actor = sa.name;

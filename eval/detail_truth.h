@@ -104,6 +104,10 @@ struct ExtractionTruthOptions {
   double band_mm = 2.0;  // as TrainingOptions::validation_band_mm
   std::vector<std::string> regions = {"forehead", "glabella", "left_eye", "right_eye", "left_cheek", "right_cheek"};
   int max_actors = 0;    // 0 = all
+  // Also write each scan's D* as write_truth/<actor>/<scan>.exr (mm, R×R float): the
+  // targets of TrainingOptions training_targets = maps; and <scan>.png, D^j, D* and
+  // D^j − D* side by side (above: as they are; below: their wrinkle band). Empty: none.
+  std::filesystem::path write_truth;
 };
 // `scans`: a folder from `crease synth scans` (each actor folder holds actor.json,
 // each scan truth.json; the set names its rig). Errors name the file.

@@ -69,6 +69,7 @@ void ExperimentDataset::VisitFields(OptionVisitor& v) {
   v.Field("loao_regressors", loao_regressors);
   v.Field("patch_sites", patch_sites);
   v.Field("truth_detail", truth_detail);
+  v.Field("truth_targets", truth_targets);
 }
 
 void ExperimentDataset::Check() const {
@@ -519,7 +520,7 @@ namespace {
 constexpr std::pair<const char*, const char*> kStageCodeVersions[] = {
     {"rig", "0.4.7"},      {"scans", "0.4.7"},    {"pairs", "0.4.7"},      {"model", "0.4.7"},
     {"loao", "0.4.7"},     {"tracker", "0.4.7"},  {"actor", "0.4.7"},      {"sequence", "0.4.7"},
-    {"truth-maps", "0.4.7"}, {"capture", "0.4.14"}, {"eval", "0.4.14"},
+    {"truth-maps", "0.4.7"}, {"capture", "0.4.14"}, {"eval", "0.4.14"}, {"scan-truth", "0.4.16"},
 };
 
 }  // namespace
@@ -652,15 +653,33 @@ ExperimentStage PlanTrainingStages(RunPlan& p, const ExperimentStage& rig, const
   split_regression(&extraction, &regression);
   json extraction_key = KeySectionOf(c, "training"), regression_key = json::object();
   split_regression(&extraction_key, &regression_key);
-  const ExperimentStage pairs =
-      p.Add("pairs", {{"training", extraction_key}}, {rig.key, scans.key}, [&](const fs::path& dir) {
-        std::vector<std::string> a = {"train",         "--scans", (scans.dir / "scans").string(),
-                                      "--rig",         rig_file.string(),
-                                      "--save-pairs",  (dir / "pairs.cpr").string(),
-                                      "--report",      (dir / "report").string()};
-        AppendSets(extraction, &a);
-        return a;
-      });
+  // dataset.truth_targets: each scan's D* (crease eval-extraction --write-truth with
+  // the extraction's options) as the targets.
+  json pairs_inputs = {{"training", extraction_key}};
+  std::vector<std::string> pairs_depends = {rig.key, scans.key};
+  fs::path target_maps;
+  if (d.truth_targets) {
+    const ExperimentStage truth =
+        p.Add("scan-truth", {{"training", extraction_key}}, {rig.key, scans.key}, [&](const fs::path& dir) {
+          std::vector<std::string> a = {"eval-extraction", "--scans", (scans.dir / "scans").string(), "--write-truth",
+                                        (dir / "maps").string(), "--json", (dir / "extraction.json").string()};
+          AppendSets(extraction, &a);
+          return a;
+        });
+    pairs_inputs["truth_targets"] = true;
+    pairs_depends.push_back(truth.key);
+    target_maps = truth.dir / "maps";
+  }
+  const ExperimentStage pairs = p.Add("pairs", pairs_inputs, pairs_depends, [&](const fs::path& dir) {
+    std::vector<std::string> a = {"train",        "--scans",  (scans.dir / "scans").string(),
+                                  "--rig",        rig_file.string(),
+                                  "--save-pairs", (dir / "pairs.cpr").string(),
+                                  "--report",     (dir / "report").string()};
+    AppendSets(extraction, &a);
+    if (!target_maps.empty())
+      a.insert(a.end(), {"--set", "training_targets=maps", "--set", "target_maps=" + target_maps.string()});
+    return a;
+  });
   const ExperimentStage model =
       p.Add("model", {{"training", regression_key}}, {pairs.key}, [&](const fs::path& dir) {
         std::vector<std::string> a = {"train", "--pairs", (pairs.dir / "pairs.cpr").string(), "--out",

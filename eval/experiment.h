@@ -2,7 +2,8 @@
 // (experiments/*.yaml), expanded into runs (sweep point × seed), each run a chain of
 // cached stages that are crease's own commands:
 //
-//   rig ─► scans ─► pairs ─► model ────┐            (pairs ─► loao: rung R0, optional)
+//   rig ─► scans ─► pairs ─► model ────┐            (pairs ─► loao: rung R0, optional;
+//                                                     scans ─► scan-truth ─► pairs: truth_targets)
 //    │                                 ├─► capture ─► eval      (per test actor)
 //    ├─► tracker ──────────────────────┤
 //    └─► actor ─► sequence ────────────┘            (model, sequence ─► truth-maps ─► capture: R1)
@@ -100,6 +101,12 @@ struct ExperimentDataset {
   // capture's own patches instead of regressed (capture detail_from_truth_maps, after
   // a `truth-maps` stage of all frames): what a perfect regressor would give.
   bool truth_detail = false;
+  // Rung "true targets" (issue 17; not the method): each training scan's studio D*
+  // with the extraction's G (a `scan-truth` stage, crease eval-extraction
+  // --write-truth) as the regression targets instead of Sec. 4.1's D^j (training
+  // training_targets = maps): the regressor learns the truth the capture is scored
+  // against. Studio scan sets only.
+  bool truth_targets = false;
   void VisitFields(OptionVisitor& v);
   void Check() const;
 };

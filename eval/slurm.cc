@@ -30,7 +30,8 @@ using json = nlohmann::json;
 
 const std::vector<std::string>& SlurmStageKinds() {
   static const std::vector<std::string> kinds = {"rig",      "scans",      "pairs",   "model", "loao",  "tracker",
-                                                 "actor",    "sequence",   "truth-maps", "capture", "eval"};
+                                                 "actor",    "sequence",   "truth-maps", "capture", "eval",
+                                                 "scan-truth"};
   return kinds;
 }
 

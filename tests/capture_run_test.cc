@@ -25,11 +25,13 @@
 
 #include "core/error.h"
 #include "core/file_util.h"
+#include "core/image_io.h"
 #include "core/json_io.h"
 #include "core/options.h"
 #include "eval/capture_job.h"
 #include "eval/tracking_metrics.h"
 #include "pipeline/training/patches.h"
+#include "pipeline/training/trainer.h"
 #include "pipeline/training/wrinkle_map.h"
 #include "synth/actor.h"
 #include "synth/dataset.h"
@@ -214,6 +216,59 @@ TEST(CaptureRun, WritesTheFolderAndSummarisesTheRun) {
     EXPECT_NE(std::string(e.what()).find("mesh_every"), std::string::npos) << e.what();
   }
   EXPECT_FALSE(fs::exists(bad.out));
+}
+
+// Rung R2-pairs: with a folder of truth maps, pairs.cpr holds every pairs_every-th
+// frame's pairs (one "actor" per frame, frame_NNNNNN), each displacement row cut from
+// that frame's own map; a missing map is an error that leaves no folder behind.
+TEST(CaptureRun, ThePairsOfEveryNthFrameCarryThatFramesTruth) {
+  const fs::path dataset = TinySequence();
+  const fs::path root = testing::FixtureDir("capture_run_pairs");
+  const DetailModel model = NoiseModel();
+  auto frames = OpenFrameSource(dataset);
+  const CameraIntrinsics K = frames->info().camera->intrinsics;
+  const FaceRig rig = CompatibleRig(Rig(), model);
+  const fs::path maps = root / "truth";
+  fs::create_directories(maps);
+  for (int f = 0; f < kFrames; ++f) {  // frame f's truth: 0.01·(f + 1) mm everywhere
+    WriteImage(maps / fmt::format("{:06d}.exr", f), cv::Mat(kR, kR, CV_32F, cv::Scalar(0.01f * (f + 1))));
+  }
+  CaptureRunOptions run;
+  run.out = root / "cap";
+  run.write_meshes = false;
+  run.pairs_truth_maps = maps.string();
+  run.pairs_every = 2;  // frames 0, 2 and 4; frame 2 is lost
+  CaptureOptions co = TinyCaptureOptions();
+  co.detail.patch_max_unseen_fraction = 1.0;  // keep every patch of the tiny frames
+  TruthTracker tracker(rig, dataset, kLost);
+  CaptureSession session(rig, model, K, co);
+  RunCapture(run, co, model, K, frames.get(), &tracker, &session);
+  const TrainingPairs pairs = ReadTrainingPairs(run.out / "pairs.cpr");
+  ASSERT_EQ(pairs.actor_names, (std::vector<std::string>{"frame_000000", "frame_000004"}));
+  const int n = model.patch.patch_size * model.patch.patch_size;
+  ASSERT_GT(pairs.texture.rows(), 0);
+  ASSERT_EQ(pairs.texture.cols(), n);
+  ASSERT_EQ(pairs.actor.size(), static_cast<size_t>(pairs.texture.rows()));
+  EXPECT_EQ(pairs.texture.rows(), 2 * session.detail().layout().num_patches());
+  for (Eigen::Index i = 0; i < pairs.displacement.rows(); ++i) {
+    const float expected = pairs.actor[i] == 0 ? 0.01f : 0.05f;
+    ASSERT_NEAR(pairs.displacement.row(i).minCoeff(), expected, 1e-6f) << "row " << i;
+    ASSERT_NEAR(pairs.displacement.row(i).maxCoeff(), expected, 1e-6f) << "row " << i;
+  }
+  EXPECT_EQ(nlohmann::json::parse(pairs.options_json), nlohmann::json::parse(model.training_json).value(
+                                                          "options", nlohmann::json::object()));
+
+  // A frame without its map: an error naming the file, and no output folder.
+  fs::remove(maps / "000004.exr");
+  run.out = root / "cap_missing";
+  auto frames2 = OpenFrameSource(dataset);
+  TruthTracker tracker2(rig, dataset, kLost);
+  CaptureSession session2(rig, model, K, co);
+  EXPECT_ERROR_HAS(RunCapture(run, co, model, K, frames2.get(), &tracker2, &session2),
+                   "000004.exr: missing (pairs_truth_maps");
+  EXPECT_FALSE(fs::exists(run.out));
+  run.pairs_every = 0;
+  EXPECT_ERROR_HAS(run.Check(), "pairs_every");
 }
 
 // Overlapped frames (the default: frame t+1's tracking and texture beside frame t's

@@ -237,6 +237,50 @@ TEST(DetailRegression, TheTruthsOwnPatchesBoundTheRegression) {
   EXPECT_THROW(r.AssembleFromTruth(t, cv::Mat(), nan), Error);
 }
 
+// Rung R2-pairs: a frame's pairs are the kept patches (the drops of Regress), their
+// texture rows the patches the regressor reads and their displacement rows the same
+// patches of the truth map; the model scores the pairs as it scores the map.
+TEST(DetailRegression, TheVideosPairsAreTheKeptPatchesOfTheTextureAndTheTruth) {
+  const DetailRegressor r = FixedRegressor();
+  cv::Mat t, truth;
+  Frame(0.18, &t, &truth);
+  cv::Mat seen(kS, kS, CV_8U, cv::Scalar(255));
+  seen(cv::Rect(0, 66, 62, 62)).setTo(0);
+  t.setTo(0.0f, seen == 0);
+  Eigen::MatrixXf T, D;
+  std::vector<int> kept;
+  r.CutPairs(t, seen, truth, &T, &D, &kept);
+  const std::vector<uint8_t> drop = r.DroppedPatches(t, seen);
+  std::vector<int> expected;
+  for (int k = 0; k < static_cast<int>(drop.size()); ++k)
+    if (!drop[k]) expected.push_back(k);
+  ASSERT_GT(expected.size(), 3u);
+  ASSERT_LT(expected.size(), drop.size());  // the occluded line's patches dropped out
+  EXPECT_EQ(kept, expected);
+  const int n = r.layout().patch_size * r.layout().patch_size;
+  ASSERT_EQ(T.rows(), static_cast<Eigen::Index>(kept.size()));
+  ASSERT_EQ(T.cols(), n);
+  ASSERT_EQ(D.rows(), T.rows());
+  // Both sides are sampled alike: the texture cut as its own truth gives equal rows.
+  Eigen::MatrixXf T2, D2;
+  r.CutPairs(t, seen, t, &T2, &D2);
+  EXPECT_EQ(T2, T);
+  EXPECT_EQ(D2, T);
+  // The regression of the rows predicts the truth's rows (as Regress predicts the map).
+  const DetailModel& m = TinyModel();
+  Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows = T;
+  Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> c(T.rows(), m.pca.dimensions());
+  m.RegressBatch(rows.data(), static_cast<int>(T.rows()), c.data());
+  const Eigen::MatrixXf predicted = (c * m.pca.basis.transpose()).rowwise() + m.pca.mean.transpose();
+  const Eigen::ArrayXf p = Eigen::Map<const Eigen::ArrayXf>(predicted.data(), predicted.size());
+  const Eigen::ArrayXf d = Eigen::Map<const Eigen::ArrayXf>(D.data(), D.size());
+  const double corr = ((p - p.mean()) * (d - d.mean())).mean() /
+                      std::sqrt((p - p.mean()).square().mean() * (d - d.mean()).square().mean());
+  std::printf("%zu of %zu patches kept; predicted vs true rows: correlation %.3f\n", kept.size(), drop.size(), corr);
+  EXPECT_GT(corr, 0.5);
+  EXPECT_THROW(r.CutPairs(t, seen, cv::Mat(64, 64, CV_32F, cv::Scalar(0)), &T, &D), Error);
+}
+
 // Steps 1–4 against a reference built from the training blocks directly: on every
 // covered texel D^t is the bilinear-weighted average of the reconstructed patches
 // that did not drop out (Splat of the kept patches over Splat of their indicator).

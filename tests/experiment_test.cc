@@ -333,9 +333,51 @@ std::vector<int> VersionNumbers(const std::string& v) {
   return n;
 }
 
+// Rung "true targets" (dataset.truth_targets): a scan-truth stage writes each training
+// scan's D*, and the pairs are cut with it as their targets; the scans are shared.
+const char* kTrueTargets = R"(
+name: targets
+dataset: {landmarks: ground-truth-surface, test_actors: 1}
+training: {detail.lowpass_bandwidth_mm: 1.0}
+variants:
+  targets:
+    extracted: {}
+    truth: {dataset.truth_targets: true}
+sweep:
+  mode: grid
+  values:
+    targets: [extracted, truth]
+)";
+
+TEST(Experiment, TheTrueTargetsRungCutsThePairsWithEachScansTruth) {
+  const auto runs = ExpandRuns(ParseExperimentConfig(kTrueTargets, "targets.yaml"));
+  ASSERT_EQ(runs.size(), 2u);
+  const fs::path cache = "/tmp/cache";
+  const StageVersions v1 = StageVersions::Uniform("1");
+  const auto extracted = PlanRunStages(runs[0], cache, v1);
+  const auto truth = PlanRunStages(runs[1], cache, v1);
+  EXPECT_EQ(FindStage(extracted, "scan-truth"), nullptr);
+  const ExperimentStage* maps = FindStage(truth, "scan-truth");
+  ASSERT_NE(maps, nullptr);
+  EXPECT_EQ(maps->argv.front(), "eval-extraction");
+  EXPECT_NE(std::find(maps->argv.begin(), maps->argv.end(), "detail.lowpass_bandwidth_mm=1.0"), maps->argv.end());
+  EXPECT_NE(std::find(maps->depends.begin(), maps->depends.end(), FindStage(truth, "scans")->key), maps->depends.end());
+  const ExperimentStage* pairs = FindStage(truth, "pairs");
+  ASSERT_NE(pairs, nullptr);
+  EXPECT_NE(std::find(pairs->depends.begin(), pairs->depends.end(), maps->key), pairs->depends.end());
+  EXPECT_NE(std::find(pairs->argv.begin(), pairs->argv.end(), "training_targets=maps"), pairs->argv.end());
+  EXPECT_NE(std::find(pairs->argv.begin(), pairs->argv.end(), "target_maps=" + (maps->dir / "maps").string()),
+            pairs->argv.end());
+  EXPECT_EQ(FindStage(truth, "scans")->key, FindStage(extracted, "scans")->key);
+  EXPECT_EQ(FindStage(truth, "sequence")->key, FindStage(extracted, "sequence")->key);
+  EXPECT_NE(pairs->key, FindStage(extracted, "pairs")->key);
+  EXPECT_NE(FindStage(truth, "model")->key, FindStage(extracted, "model")->key);
+}
+
 TEST(Experiment, EachStageKindKeysItsOwnCodeVersion) {
   const auto toy = ExpandRuns(ParseExperimentConfig(kConfig, "toy.yaml"));
   const auto ladder = ExpandRuns(ParseExperimentConfig(kLadder, "ladder.yaml"));
+  const auto targets = ExpandRuns(ParseExperimentConfig(kTrueTargets, "targets.yaml"));
   const fs::path cache = "/tmp/cache";
   // A new eval version re-keys the evals alone; a new capture version the captures
   // and, through their keys, the evals that read them.
@@ -353,11 +395,11 @@ TEST(Experiment, EachStageKindKeysItsOwnCodeVersion) {
   // truth-maps too), none after crease's own version; a kind it lacks is an error.
   const StageVersions current = CurrentStageVersions();
   std::set<std::string> kinds;
-  for (const auto* runs : {&toy, &ladder})
+  for (const auto* runs : {&toy, &ladder, &targets})
     for (const auto& r : *runs)
       for (const auto& s : PlanRunStages(r, cache, current)) kinds.insert(s.kind);
   for (const char* kind : {"rig", "scans", "pairs", "model", "loao", "tracker", "actor", "sequence", "truth-maps",
-                           "capture", "eval"})
+                           "capture", "eval", "scan-truth"})
     EXPECT_TRUE(kinds.count(kind)) << kind;
   for (const auto& [kind, version] : current.by_kind)
     EXPECT_LE(VersionNumbers(version), VersionNumbers(CREASE_VERSION)) << kind;

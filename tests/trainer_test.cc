@@ -12,7 +12,9 @@
 #include <unistd.h>
 
 #include "core/file_util.h"
+#include "core/image_io.h"
 #include "core/mesh_io.h"
+#include "eval/detail_truth.h"
 #include "synth/dataset.h"
 #include "synth/procedural_rig.h"
 #include "tests/synth_test_util.h"
@@ -211,6 +213,51 @@ TEST(Trainer, TargetsInTheWrinkleBandKeepThePairsAndDropTheBroadShape) {
   // An extraction option: saved pairs refuse it.
   EXPECT_ERROR_HAS(OptionsForPairs(raw, "raw.cpr", [](TrainingOptions* t) { t->target_band_mm = 2.0; }),
                    "target_band_mm");
+}
+
+// training_targets = maps: the targets are the folder's maps (here the studio's D* of
+// each scan, written by EvaluateExtraction), cut at the pairs the textures select.
+TEST(Trainer, TargetsFromMapsAreCutAtTheSamePairs) {
+  const ScanSet set = ReadScanSet(TinyScans());
+  TrainingOptions o = TinyTrainingOptions();
+  const TrainingPairs raw = ExtractTrainingPairs(set, Rig(), o, {}, nullptr);
+  const fs::path dir = testing::TestDir() / "dstar";
+  ExtractionTruthOptions eo;
+  eo.detail = o.detail;
+  eo.write_truth = dir;
+  const ExtractionTruthReport report = EvaluateExtraction(TinyScans(), eo);
+  ASSERT_EQ(report.rows.size(), 2u);
+  const std::string actor = set.actors[0].name;
+  for (const ScanEntry& scan : set.actors[0].scans) {
+    ASSERT_TRUE(fs::is_regular_file(dir / actor / (scan.name + ".exr"))) << scan.name;
+    EXPECT_TRUE(fs::is_regular_file(dir / actor / (scan.name + ".png"))) << scan.name;
+  }
+  const cv::Mat neutral = ReadImage(dir / actor / "neutral.exr");
+  EXPECT_EQ(cv::countNonZero(neutral != 0), 0);  // D*(0) = 0
+
+  o.training_targets = TrainingTargets::kMaps;
+  o.target_maps = dir.string();
+  const TrainingPairs truth = ExtractTrainingPairs(set, Rig(), o, {}, nullptr);
+  ASSERT_GT(raw.texture.rows(), 10);
+  EXPECT_EQ(truth.texture, raw.texture);
+  const Eigen::ArrayXf a = Eigen::Map<const Eigen::ArrayXf>(raw.displacement.data(), raw.displacement.size());
+  const Eigen::ArrayXf b = Eigen::Map<const Eigen::ArrayXf>(truth.displacement.data(), truth.displacement.size());
+  const double corr = ((a - a.mean()) * (b - b.mean())).mean() /
+                      std::sqrt((a - a.mean()).square().mean() * (b - b.mean()).square().mean());
+  std::printf("D^j's targets vs D*'s at the same %ld pairs: correlation %.3f (the brow raise's maps: %.3f)\n",
+              static_cast<long>(raw.texture.rows()), corr, report.rows[1].detail.correlation);
+  EXPECT_GT(corr, 0.3);
+  EXPECT_LT(corr, 0.999);  // not D^j itself
+
+  fs::remove(dir / actor / "neutral.exr");
+  EXPECT_ERROR_HAS(ExtractTrainingPairs(set, Rig(), o, {}, nullptr), "neutral.exr: missing");
+  o.target_maps.clear();
+  EXPECT_ERROR_HAS(o.Check(), "target_maps");
+  EXPECT_ERROR_HAS(OptionsForPairs(raw, "raw.cpr", [&](TrainingOptions* t) {
+                     t->training_targets = TrainingTargets::kMaps;
+                     t->target_maps = dir.string();
+                   }),
+                   "the pairs were extracted with");
 }
 
 TEST(Trainer, BadScanSets) {

@@ -25,8 +25,8 @@ namespace {
 // `crease capture`: its flags, turned into CaptureOptions and CaptureRunOptions.
 struct CaptureArgs {
   TrackingFlags tf;
-  std::string model_path, out, preview, config;
-  int mesh_every = 1;
+  std::string model_path, out, preview, config, pairs_truth;
+  int mesh_every = 1, pairs_every = 1;
   bool no_meshes = false, no_maps = false, write_textures = false, overwrite = false, serial = false;
   std::vector<std::string> sets;
 };
@@ -58,6 +58,8 @@ void RunCaptureCommand(const CaptureArgs& a) {
   run.write_maps = !a.no_maps;
   run.write_textures = a.write_textures;
   run.overlap_frames = !a.serial;
+  run.pairs_truth_maps = a.pairs_truth;
+  run.pairs_every = a.pairs_every;
   const CaptureSummary summary =
       CaptureFromFiles(files, options, run, [](const std::string& line) { std::printf("%s\n", line.c_str()); });
   std::printf("%s", summary.BriefReport().c_str());
@@ -81,6 +83,12 @@ void AddCaptureCommand(CLI::App& app) {
   cmd->add_flag("--no-meshes", a->no_meshes, "Skip the per-frame PLY/VTP meshes");
   cmd->add_flag("--textures", a->write_textures, "Also write every frame's texture T^t (textures/NNNNNN.png, sRGB gray)");
   cmd->add_flag("--no-maps", a->no_maps, "Skip the per-frame displacement maps D^t (EXR)");
+  cmd->add_option("--pairs-truth", a->pairs_truth,
+                  "Issue 17's rung R2-pairs: a folder of the frames' true D* maps (`crease truth-maps`); writes "
+                  "pairs.cpr, the video's own regression pairs (T^t and D* on the capture's patches), for `crease "
+                  "model eval-pairs`");
+  cmd->add_option("--pairs-every", a->pairs_every, "With --pairs-truth: the pairs of every N-th frame")
+      ->capture_default_str();
   cmd->add_option("--config", a->config, "YAML of capture options (pipeline/capture/capture.h CaptureOptions)");
   cmd->add_option("--set", a->sets, "Capture option KEY=VALUE (repeatable), e.g. detail.wrinkle_frames=20 refine=false");
   cmd->add_flag("--overwrite", a->overwrite, "Replace an existing output folder");

@@ -83,7 +83,7 @@ void AddTrainCommand(CLI::App& app) {
 
 // eval-extraction
 struct EvalExtractionArgs {
-  std::string scans, config, json_out;
+  std::string scans, config, json_out, write_truth;
   std::vector<std::string> sets;
   int actors = 0;
 };
@@ -96,6 +96,7 @@ void RunEvalExtraction(const EvalExtractionArgs& a) {
   o.detail = training.detail;
   o.band_mm = training.validation_band_mm;
   o.max_actors = a.actors;
+  o.write_truth = a.write_truth;
   const ExtractionTruthReport r = EvaluateExtraction(a.scans, o);
   std::printf("%s%zu scans in %.1f s\n", r.ToTable().c_str(), r.rows.size(), r.seconds);
   if (!a.json_out.empty()) WriteFileAtomic(a.json_out, [&](std::ostream& out) { out << r.ToJson() << "\n"; });
@@ -111,6 +112,9 @@ void AddEvalExtractionCommand(CLI::App& app) {
   cmd->add_option("--set", a->sets, "Training option KEY=VALUE (repeatable), e.g. detail.lowpass_bandwidth_mm=2");
   cmd->add_option("--actors", a->actors, "Evaluate the first N actors only (0 = all)")->capture_default_str();
   cmd->add_option("--json", a->json_out, "Write the rows as JSON");
+  cmd->add_option("--write-truth", a->write_truth,
+                  "Also write each scan's D* as DIR/<actor>/<scan>.exr (the targets of `crease train --set "
+                  "training_targets=maps --set target_maps=DIR`)");
   cmd->callback([a] { RunEvalExtraction(*a); });
 }
 

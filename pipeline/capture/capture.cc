@@ -32,8 +32,8 @@ MatX3d CameraVertices(const FaceRig& rig, const Eigen::VectorXd& identity, const
   return V;
 }
 
-// Frame `frame`'s map of a folder of per-frame maps NNNNNN.exr (channel 0, mm, the
-// rig's UV layout), as CV_32F R×R. `option` names the option that asked for it.
+}  // namespace
+
 cv::Mat ReadFrameMap(const std::string& dir, int frame, int R, const char* option) {
   const std::filesystem::path p = std::filesystem::path(dir) / fmt::format("{:06d}.exr", frame);
   Require(std::filesystem::is_regular_file(p), fmt::format("{}: missing ({} needs a map per frame)", p.string(), option));
@@ -43,8 +43,6 @@ cv::Mat ReadFrameMap(const std::string& dir, int frame, int R, const char* optio
   d.convertTo(d, CV_32F);
   return d.rows == R ? d : ResampleSquareMap(d, R);
 }
-
-}  // namespace
 
 cv::Mat WrinkleTextureFromDisplacement(const cv::Mat& displacement, int R) {
   Require(!displacement.empty() && displacement.rows == displacement.cols,

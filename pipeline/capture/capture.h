@@ -54,6 +54,11 @@ namespace crease {
 
 class OptionVisitor;
 
+// Frame `frame`'s map of a folder of per-frame maps NNNNNN.exr (channel 0, mm, the
+// rig's UV layout), as CV_32F R×R (resampled when its size differs). `option` names
+// the option that asked for it. Throws Error when the file is missing or not square.
+cv::Mat ReadFrameMap(const std::string& dir, int frame, int R, const char* option);
+
 // A displacement map (CV_32F, mm, positive outwards) as the gray texture a groove
 // would give under light from the front: T = 0.5 + 0.5 · D / 1 mm, clamped to
 // [0, 1], resampled to R×R (CaptureOptions::wrinkle_map_from_maps).

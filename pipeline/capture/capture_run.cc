@@ -25,6 +25,7 @@
 #include "pipeline/capture/capture_io.h"
 #include "pipeline/capture/tracking_record.h"
 #include "pipeline/training/patches.h"
+#include "pipeline/training/trainer.h"
 
 namespace crease {
 
@@ -34,6 +35,7 @@ using nlohmann::json;
 void CaptureRunOptions::Check() const {
   Require(!out.empty(), "CaptureRunOptions.out: no output folder given");
   Require(mesh_every >= 1, fmt::format("CaptureRunOptions.mesh_every = {}: must be at least 1", mesh_every));
+  Require(pairs_every >= 1, fmt::format("CaptureRunOptions.pairs_every = {}: must be at least 1", pairs_every));
 }
 
 namespace {
@@ -189,6 +191,8 @@ class CaptureRecorder {
   void WriteMaps(const CapturedFrame& f) const;
   void WriteMeshes(const CapturedFrame& f);
   void WritePreview(const CapturedFrame& f);
+  void CutPairs(const CapturedFrame& f);
+  void WritePairs(const DetailModel& model) const;
 
   const CaptureRunOptions& options_;
   const CameraIntrinsics& intrinsics_;
@@ -204,6 +208,9 @@ class CaptureRecorder {
   std::vector<int> indices_;
   int tracked_ = 0, with_detail_ = 0;
   SteadyState steady_;
+  // pairs_truth_maps: the frames' pairs (DetailRegressor::CutPairs), one block per frame.
+  std::vector<Eigen::MatrixXf> pair_texture_, pair_displacement_;
+  std::vector<int> pair_frames_;
 };
 
 CaptureRecorder::CaptureRecorder(const CaptureRunOptions& options, const CameraIntrinsics& intrinsics,
@@ -258,6 +265,44 @@ void CaptureRecorder::Record(const CapturedFrame& f) {
   WriteMaps(f);
   WriteMeshes(f);
   WritePreview(f);
+  CutPairs(f);
+}
+
+void CaptureRecorder::CutPairs(const CapturedFrame& f) {
+  if (options_.pairs_truth_maps.empty() || !f.has_detail || f.frame % options_.pairs_every != 0) return;
+  const int R = session_.detail().map_size();
+  const cv::Mat truth = ReadFrameMap(options_.pairs_truth_maps, f.frame, R, "pairs_truth_maps");
+  Eigen::MatrixXf t, d;
+  session_.detail().CutPairs(f.texture.gray, f.texture.seen, truth, &t, &d);
+  pair_texture_.push_back(std::move(t));
+  pair_displacement_.push_back(std::move(d));
+  pair_frames_.push_back(f.frame);
+}
+
+// pairs.cpr: the frames' pairs as a training pair file (WriteTrainingPairs), with the
+// model's extraction options so that `crease model eval-pairs` reads them as its own.
+void CaptureRecorder::WritePairs(const DetailModel& model) const {
+  if (options_.pairs_truth_maps.empty()) return;
+  TrainingPairs pairs;
+  pairs.options_json = nlohmann::json::parse(model.training_json).value("options", nlohmann::json::object()).dump();
+  pairs.scan_set = options_.input;
+  pairs.scans = static_cast<int>(pair_frames_.size());
+  pairs.actors = pairs.scans;
+  Eigen::Index rows = 0;
+  for (const Eigen::MatrixXf& t : pair_texture_) rows += t.rows();
+  const Eigen::Index n = pair_texture_.empty() ? 0 : pair_texture_.front().cols();
+  pairs.texture.resize(rows, n);
+  pairs.displacement.resize(rows, n);
+  Eigen::Index row = 0;
+  for (size_t k = 0; k < pair_frames_.size(); ++k) {
+    const Eigen::Index m = pair_texture_[k].rows();
+    pairs.texture.middleRows(row, m) = pair_texture_[k];
+    pairs.displacement.middleRows(row, m) = pair_displacement_[k];
+    pairs.actor.insert(pairs.actor.end(), static_cast<size_t>(m), static_cast<int32_t>(k));
+    pairs.actor_names.push_back(fmt::format("frame_{:06d}", pair_frames_[k]));
+    row += m;
+  }
+  WriteTrainingPairs(dir_ / "pairs.cpr", pairs);
 }
 
 void CaptureRecorder::WriteMaps(const CapturedFrame& f) const {
@@ -327,6 +372,7 @@ CaptureSummary CaptureRecorder::Finish(int frames, const CaptureOptions& capture
     WriteImage(dir_ / "maps" / "wrinkle_map.png", DrawPatchLayout(wm.probability, session_.detail().layout(), wm.valid));
   }
   WriteFileAtomic(dir_ / "timings.csv", [&](std::ostream& o) { o << csv_; });
+  WritePairs(model);
 
   CaptureSummary s;
   s.input = options_.input;

@@ -15,6 +15,7 @@
 //                               L^t, L~^t and H^t of every mesh_every-th frame, unless !write_meshes
 //   maps/mesoscopic.exr, maps/wrinkle_map.{exr,png}   the session's per-actor maps
 //   previews/NNNNNN.png         every 30th frame of the preview video, with a preview
+//   pairs.cpr                   the video's regression pairs (T^t, D*), with pairs_truth_maps
 // The folder is written under a temporary name and renamed when complete.
 //
 //   FrameTracker tracker(...);                       // a GlobalTracker
@@ -68,13 +69,22 @@ struct CaptureRunOptions {
   // of the serial order, byte for byte; the speed is then the wall clock per frame.
   // false: one frame after another (each stage's time alone).
   bool overlap_frames = true;
+  // Issue 17's rung R2-pairs (not in the paper): a folder of the frames' true D* maps
+  // NNNNNN.exr (`crease truth-maps`, with the model's G). With it the folder also gets
+  // pairs.cpr: the video's own regression pairs of every pairs_every-th frame with
+  // detail (DetailRegressor::CutPairs: T^t's patches on the capture's layout as the
+  // regressor reads them, D*'s on the same patches; one "actor" per frame, named
+  // frame_NNNNNN), to score a model on them with `crease model eval-pairs` beside the
+  // scans' pairs. Empty: no pairs.
+  std::string pairs_truth_maps;
+  int pairs_every = 1;
   // Provenance, recorded in capture.json as given.
   std::string input;           // the frames' path
   std::string model_path;      // the detail model's file
   std::string source_rig;      // the rig file the session's rig was made from
   double setup_s = 0.0;        // seconds spent before the run (rig compatibility, session set-up)
 
-  // Throws Error naming the field: an empty out, mesh_every < 1.
+  // Throws Error naming the field: an empty out, mesh_every < 1, pairs_every < 1.
   void Check() const;
 };
 

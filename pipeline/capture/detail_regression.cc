@@ -588,6 +588,34 @@ cv::Mat DetailRegressor::AssembleFromTruth(const cv::Mat& gray, const cv::Mat& s
   return D;
 }
 
+void DetailRegressor::CutPairs(const cv::Mat& gray, const cv::Mat& seen, const cv::Mat& truth,
+                               Eigen::MatrixXf* texture, Eigen::MatrixXf* displacement,
+                               std::vector<int>* patches) const {
+  const Impl& m = *impl_;
+  Require(m.fixed, "DetailRegressor::CutPairs: the layout is not fixed yet");
+  m.RequireFrame(gray, seen, "DetailRegressor::CutPairs");
+  m.RequireFrame(truth, cv::Mat(), "DetailRegressor::CutPairs truth");
+  Require(cv::checkRange(truth), "DetailRegressor::CutPairs: the truth map has non-finite values");
+  const int N = m.layout.num_patches(), n = m.layout.patch_size * m.layout.patch_size;
+  std::vector<int> kept;
+  Eigen::MatrixXf t_all, d_all;
+  if (N > 0) {
+    const Impl::Prepared p = m.Prepare(gray, seen, nullptr);
+    for (int k = 0; k < N; ++k)
+      if (!p.drop[k]) kept.push_back(k);
+    m.sampler->Sample(p.input.gray, &t_all);
+    d_all = m.sampler->Sample(truth);
+  }
+  const auto rows = static_cast<Eigen::Index>(kept.size());
+  texture->resize(rows, n);
+  displacement->resize(rows, n);
+  for (Eigen::Index i = 0; i < rows; ++i) {
+    texture->row(i) = t_all.row(kept[i]);
+    displacement->row(i) = d_all.row(kept[i]);
+  }
+  if (patches) *patches = std::move(kept);
+}
+
 std::vector<uint8_t> DetailRegressor::DroppedPatches(const cv::Mat& gray, const cv::Mat& seen) const {
   const Impl& m = *impl_;
   Require(m.fixed, "DetailRegressor::DroppedPatches: the layout is not fixed yet");

@@ -206,6 +206,17 @@ class DetailRegressor {
   cv::Mat AssembleFromTruth(const cv::Mat& gray, const cv::Mat& seen, const cv::Mat& truth,
                             DetailTiming* timing = nullptr) const;
 
+  // Issue 17's rung R2-pairs (not in the paper): this frame's regression pairs on the
+  // fixed layout, to score a model on the video's own patches (`crease model
+  // eval-pairs`) beside the scans' pairs. Row i of `texture` is patch i's t_i exactly
+  // as Regress feeds the regressor (T^t flattened as Regress flattens it, the raw
+  // samples of PatchSampler, as training cuts them); row i of `displacement` is the
+  // same patch of `truth` (CV_32F R×R, mm: the frame's true D*). Only the patches
+  // Regress keeps (not dropped: unseen, gated), in layout order; `patches` (optional)
+  // receives their layout indices. Throws Error as AssembleFromTruth.
+  void CutPairs(const cv::Mat& gray, const cv::Mat& seen, const cv::Mat& truth, Eigen::MatrixXf* texture,
+                Eigen::MatrixXf* displacement, std::vector<int>* patches = nullptr) const;
+
   // Which patches of layout() drop out of the frame (1 = dropped: unseen, or gated;
   // header "Unseen texels"), as Regress decides. Requires layout_fixed().
   std::vector<uint8_t> DroppedPatches(const cv::Mat& gray, const cv::Mat& seen) const;

@@ -40,6 +40,7 @@ void TrainingOptions::VisitFields(OptionVisitor& v) {
   v.Field("training_lights", training_lights);
   v.Field("max_actors", max_actors);
   v.Field("training_targets", training_targets);
+  v.Field("target_maps", target_maps);
   v.Field("validation_band_mm", validation_band_mm);
   v.Field("pair_shift_texels", pair_shift_texels);
   v.Field("pair_shift_steps", pair_shift_steps);
@@ -60,6 +61,8 @@ void TrainingOptions::Check() const {
   CheckGe("TrainingOptions", "validation_band_mm", validation_band_mm, 0.0);
   CheckGe("TrainingOptions", "pair_shift_steps", pair_shift_steps, 0);
   CheckGe("TrainingOptions", "target_band_mm", target_band_mm, 0.0);
+  Require((training_targets == TrainingTargets::kMaps) == !target_maps.empty(),
+          "TrainingOptions: training_targets = maps needs target_maps (a folder), and target_maps needs it");
   CheckLe("TrainingOptions", "target_band_mm", target_band_mm, 100.0);
   Require(std::isfinite(pair_shift_texels) && pair_shift_texels > 0,
           fmt::format("TrainingOptions.pair_shift_texels = {} must be finite and > 0", pair_shift_texels));
@@ -369,11 +372,11 @@ void WriteTexturePicture(const fs::path& report_dir, const std::string& actor, c
   WriteImage(report_dir / fmt::format("texture_{}_{}.png", actor, scan), out8, {.srgb = false});
 }
 
-// Sec. 4.1: D^j of one scan, timed; with training_targets = truth, the ground
-// truth instead. Where the scan set has ground truth (the expression's minus the
-// neutral's: D^j is relative to M_0^j, which carries the neutral's own detail,
-// static lines), D^j is compared with it; pictures. `aligned_normals` receives
-// M_0^j's vertex normals.
+// Sec. 4.1: D^j of one scan, timed; with training_targets = truth the ground
+// truth instead, with = maps the scan's map in target_maps. Where the scan set has
+// ground truth (the expression's minus the neutral's: D^j is relative to M_0^j,
+// which carries the neutral's own detail, static lines), D^j is compared with it;
+// pictures. `aligned_normals` receives M_0^j's vertex normals.
 cv::Mat ScanDisplacement(const ExtractionContext& ctx, const std::string& actor, const ScanEntry& scan,
                          const DetailExtractor& extractor, const MatX3d& V, const std::string& name,
                          const cv::Mat& neutral_truth, double mm_per_texel, MatX3d* aligned_normals) {
@@ -391,6 +394,11 @@ cv::Mat ScanDisplacement(const ExtractionContext& ctx, const std::string& actor,
     Require(!scan.truth_displacement.empty() && !neutral_truth.empty(),
             fmt::format("{}: training_targets = truth needs the scan set's ground truth (a studio scan set)", name));
     D = ReadTruth(scan.truth_displacement, R) - neutral_truth;
+  } else if (ctx.options.training_targets == TrainingTargets::kMaps) {
+    const fs::path p = fs::path(ctx.options.target_maps) / actor / (scan.name + ".exr");
+    Require(fs::is_regular_file(p), fmt::format("{}: missing (training_targets = maps needs a map per scan)", p.string()));
+    D = ReadTruth(p, R);
+    Require(cv::checkRange(D), fmt::format("{}: non-finite values", p.string()));
   }
   cv::Mat mask;  // the texels D^j holds
   cv::bitwise_and(extractor.coverage(), detail.valid, mask);

@@ -41,8 +41,8 @@
 namespace crease {
 
 // TrainingOptions::training_targets (see there).
-enum class TrainingTargets { kExtracted, kTruth };
-constexpr std::array<const char*, 2> OptionEnumNames(TrainingTargets) { return {"extracted", "truth"}; }
+enum class TrainingTargets { kExtracted, kTruth, kMaps };
+constexpr std::array<const char*, 3> OptionEnumNames(TrainingTargets) { return {"extracted", "truth", "maps"}; }
 
 struct TrainingOptions {
   DetailExtractionOptions detail;  // Sec. 4.1
@@ -61,8 +61,12 @@ struct TrainingOptions {
   // The regression targets d_i (issue 17's rung R0b; not in the paper): "extracted"
   // (Sec. 4.1's D^j, the method) or "truth" (a studio scan set's ground-truth
   // expression displacement minus the neutral's: the wrinkle layer alone, to
-  // separate what extraction contributes from what appearance allows).
+  // separate what extraction contributes from what appearance allows) or "maps"
+  // (target_maps/<actor>/<scan>.exr, mm in the rig's UV: e.g. the studio's D* of
+  // each scan, `crease eval-extraction --write-truth DIR`, the truth the capture is
+  // scored against).
   TrainingTargets training_targets = TrainingTargets::kExtracted;
+  std::string target_maps;  // the folder training_targets = maps reads
   // Validation against ground truth also in the wrinkle band: both maps minus
   // their Gaussian blur of this σ (mm on the face), which removes the broad
   // medium-frequency expression shape that D^j legitimately holds (the part of
