@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <unistd.h>
 
 #include <fmt/format.h>
@@ -17,6 +18,7 @@
 #include "core/mesh_io.h"
 #include "core/mesh_ops.h"
 #include "core/picture.h"
+#include "core/ray_caster.h"
 #include "eval/tracking_metrics.h"
 #include "pipeline/training/scan_set.h"
 #include "pipeline/training/wrinkle_map.h"
@@ -63,6 +65,51 @@ cv::Mat DetailTruth::Detail(const Eigen::VectorXd& expression) const {
   return Wrinkles(expression) + CoarseBand(expression);
 }
 
+namespace {
+
+// Per texel of `raster`, the signed distance along the interpolated normal from the
+// flat-interpolated `coarse` to `surface`; NaN where no surface is within max_mm.
+cv::Mat DistanceAlongNormals(const UvRaster& raster, const TriMesh& coarse, const TriMesh& surface, double max_mm) {
+  const MatX3d N = VertexNormals(coarse);
+  RayCasterOptions robust;
+  robust.robust = true;
+  const RayCaster caster(surface, robust, "exact detail: the high-resolution surface");
+  std::vector<Eigen::Vector3f> origins, directions;
+  std::vector<int> texel;
+  for (int k = 0; k < raster.width * raster.height; ++k) {
+    const int t = raster.triangle[k];
+    if (t < 0) continue;
+    Eigen::Vector3d p = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::Zero();
+    for (int c = 0; c < 3; ++c) {
+      p += raster.barycentric[k][c] * coarse.V.row(coarse.F(t, c)).transpose();
+      n += raster.barycentric[k][c] * N.row(coarse.F(t, c)).transpose();
+    }
+    if (!(n.norm() > 0.0)) continue;
+    origins.push_back(p.cast<float>());
+    directions.push_back(n.normalized().cast<float>());
+    texel.push_back(k);
+  }
+  std::vector<SignedHit> hits;
+  caster.IntersectSignedBatch(origins, directions, static_cast<float>(max_mm), &hits);
+  cv::Mat out(raster.height, raster.width, CV_32F, cv::Scalar(std::numeric_limits<float>::quiet_NaN()));
+  float* o = out.ptr<float>();
+  for (size_t i = 0; i < hits.size(); ++i)
+    if (hits[i].valid()) o[texel[i]] = hits[i].t;
+  return out;
+}
+
+}  // namespace
+
+cv::Mat DetailTruth::ExactDetail(const Eigen::VectorXd& expression, const TriMesh& surface,
+                                 const TriMesh& neutral_surface, double max_mm) const {
+  const Eigen::VectorXd identity = ZeroPadded(model_.actor().identity, compatible_.num_identity());
+  const Eigen::VectorXd w = ZeroPadded(expression, compatible_.num_expressions());
+  const TriMesh coarse = compatible_.Evaluate(identity, w);
+  const TriMesh neutral = compatible_.Evaluate(identity, Eigen::VectorXd::Zero(compatible_.num_expressions()));
+  return DistanceAlongNormals(raster_, coarse, surface, max_mm) -
+         DistanceAlongNormals(raster_, neutral, neutral_surface, max_mm);
+}
+
 }  // namespace crease
 
 namespace crease {
@@ -81,24 +128,52 @@ Eigen::VectorXd ReadTruthExpression(const FaceRig& rig, const std::filesystem::p
 
 namespace {
 
-// `dir`/SCAN.exr: the scan's D* (mm); `dir`/SCAN.png: D^j, D* and D^j − D* side by
-// side (top: as they are; bottom: their wrinkle band), half size, on one colour
-// range of three times D*'s RMS (at least 0.02 mm).
+// The exact detail of a scan (DetailTruth::ExactDetail) and the texels where it
+// and `mask` are valid; 0 elsewhere.
+struct ExactScanDetail {
+  cv::Mat exact, valid;
+};
+ExactScanDetail ExactOfScan(const DetailTruth& truth, const Eigen::VectorXd& beta, const TriMesh& scan,
+                            const TriMesh& neutral, const cv::Mat& mask) {
+  ExactScanDetail e{truth.ExactDetail(beta, scan, neutral), mask.clone()};
+  e.valid.setTo(0, e.exact != e.exact);  // NaN: no surface within reach
+  e.exact.setTo(0.0f, e.valid == 0);
+  return e;
+}
+
+// D^j and D* against the exact detail, in the wrinkle band over its valid texels.
+void AddExactComparison(const ExactScanDetail& e, const cv::Mat& extracted, const cv::Mat& detail, double sigma,
+                        ExtractionTruthRow* row) {
+  const WrinkleBandMask bm = MakeWrinkleBandMask(e.valid, sigma);
+  const cv::Mat exact_band = WrinkleBand(e.exact, bm);
+  row->exact_extracted_band = CompareMaps(WrinkleBand(extracted, bm), exact_band, e.valid);
+  row->exact_detail_band = CompareMaps(WrinkleBand(detail, bm), exact_band, e.valid);
+}
+
+// `dir`/SCAN.exr: the scan's D* (mm); `dir`/SCAN.png, half size, on one colour range
+// of three times D*'s RMS (at least 0.02 mm): D^j, D* and D^j − D* (top: as they are;
+// middle: their wrinkle band); bottom: the exact detail's band (ExactDetail), D^j's
+// band minus it, D*'s band minus it.
 void WriteScanTruth(const std::filesystem::path& dir, const std::string& scan, const cv::Mat& extracted,
-                    const cv::Mat& detail, const cv::Mat& mask, const WrinkleBandMask& band) {
+                    const cv::Mat& detail, const cv::Mat& mask, const ExactScanDetail& e, double sigma) {
   std::filesystem::create_directories(dir);
   WriteImage(dir / (scan + ".exr"), detail);
   const double rms = CompareMaps(detail, cv::Mat::zeros(detail.size(), CV_32F), mask).extracted_rms_mm;
   const double range = std::max(0.02, 3.0 * rms);
-  auto row = [&](const cv::Mat& a, const cv::Mat& b) {
+  auto row = [&](const cv::Mat& a, const cv::Mat& b, const cv::Mat& c, const cv::Mat& m) {
     cv::Mat out;
-    cv::hconcat(std::vector<cv::Mat>{DisplacementPicture(a, range, mask), DisplacementPicture(b, range, mask),
-                                     DisplacementPicture(a - b, range, mask)},
+    cv::hconcat(std::vector<cv::Mat>{DisplacementPicture(a, range, m), DisplacementPicture(b, range, m),
+                                     DisplacementPicture(c, range, m)},
                 out);
     return out;
   };
+  const WrinkleBandMask bm = MakeWrinkleBandMask(mask, sigma), be = MakeWrinkleBandMask(e.valid, sigma);
+  const cv::Mat xb = WrinkleBand(extracted, bm), db = WrinkleBand(detail, bm);
+  const cv::Mat eb = WrinkleBand(e.exact, be), xe = WrinkleBand(extracted, be), de = WrinkleBand(detail, be);
   cv::Mat picture, half;
-  cv::vconcat(row(extracted, detail), row(WrinkleBand(extracted, band), WrinkleBand(detail, band)), picture);
+  cv::vconcat(std::vector<cv::Mat>{row(extracted, detail, extracted - detail, mask), row(xb, db, xb - db, mask),
+                                   row(eb, xe - eb, de - eb, e.valid)},
+              picture);
   cv::resize(picture, half, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
   WriteImage(dir / (scan + ".png"), half, {.srgb = false});
 }
@@ -138,9 +213,6 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
       const cv::Mat wrinkles = truth.Wrinkles(beta), band = truth.CoarseBand(beta);
       const cv::Mat detail = wrinkles + band;
       const WrinkleBandMask bm = MakeWrinkleBandMask(mask, sigma);
-      if (!options.write_truth.empty()) {
-        WriteScanTruth(options.write_truth / sa.name, scan.name, d.displacement, detail, mask, bm);
-      }
       const cv::Mat db = WrinkleBand(d.displacement, bm);
       ExtractionTruthRow row;
       row.actor = sa.name;
@@ -153,6 +225,11 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
       row.detail_regions = CompareMaps(d.displacement, detail, region_mask);
       row.detail_regions_band = CompareMaps(db, detail_b, region_mask);
       row.coarse_band_rms_mm = CompareMaps(band, cv::Mat::zeros(band.size(), CV_32F), mask).extracted_rms_mm;
+      const ExactScanDetail exact = ExactOfScan(truth, beta, meshes[j], meshes[0], mask);
+      AddExactComparison(exact, d.displacement, detail, sigma, &row);
+      if (!options.write_truth.empty()) {
+        WriteScanTruth(options.write_truth / sa.name, scan.name, d.displacement, detail, mask, exact, sigma);
+      }
       report.rows.push_back(row);
     }
   }
@@ -161,15 +238,18 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
 }
 
 std::string ExtractionTruthReport::ToTable() const {
-  std::string o = fmt::format("{:<10} {:<22} {:>9} {:>8} {:>8} | {:>8} {:>8} {:>8} | {:>8} {:>8}\n", "actor", "scan",
-                              "band RMS", "wr corr", "wr bcorr", "D* RMS", "D* corr", "D* bcorr", "reg corr",
-                              "reg bcorr");
+  std::string o = fmt::format("{:<10} {:<22} {:>9} {:>8} {:>8} | {:>8} {:>8} {:>8} | {:>8} {:>8} | {:>8} {:>8}\n",
+                              "actor", "scan", "band RMS", "wr corr", "wr bcorr", "D* RMS", "D* corr", "D* bcorr",
+                              "reg corr", "reg bcorr", "ex: D^j", "ex: D*");
   for (const auto& r : rows) {
-    o += fmt::format("{:<10} {:<22} {:>9.4f} {:>8.3f} {:>8.3f} | {:>8.4f} {:>8.3f} {:>8.3f} | {:>8.3f} {:>8.3f}\n",
-                     r.actor, r.scan, r.coarse_band_rms_mm, r.wrinkles.correlation, r.wrinkles_band.correlation,
-                     r.detail.reference_rms_mm, r.detail.correlation, r.detail_band.correlation,
-                     r.detail_regions.correlation, r.detail_regions_band.correlation);
+    o += fmt::format(
+        "{:<10} {:<22} {:>9.4f} {:>8.3f} {:>8.3f} | {:>8.4f} {:>8.3f} {:>8.3f} | {:>8.3f} {:>8.3f} | {:>8.3f} {:>8.3f}\n",
+        r.actor, r.scan, r.coarse_band_rms_mm, r.wrinkles.correlation, r.wrinkles_band.correlation,
+        r.detail.reference_rms_mm, r.detail.correlation, r.detail_band.correlation, r.detail_regions.correlation,
+        r.detail_regions_band.correlation, r.exact_extracted_band.correlation, r.exact_detail_band.correlation);
   }
+  o += "(band: the wrinkle band; reg: the wrinkle regions; ex: against the exact detail in the band, "
+       "DetailTruth::ExactDetail)\n";
   return o;
 }
 
@@ -184,7 +264,9 @@ std::string ExtractionTruthReport::ToJson() const {
                  {"detail", MapComparisonJson(r.detail)},
                  {"detail_band", MapComparisonJson(r.detail_band)},
                  {"detail_regions", MapComparisonJson(r.detail_regions)},
-                 {"detail_regions_band", MapComparisonJson(r.detail_regions_band)}});
+                 {"detail_regions_band", MapComparisonJson(r.detail_regions_band)},
+                 {"exact_extracted_band", MapComparisonJson(r.exact_extracted_band)},
+                 {"exact_detail_band", MapComparisonJson(r.exact_detail_band)}});
   }
   return nlohmann::json{{"scans", j}, {"seconds", seconds}}.dump(1);
 }

@@ -234,6 +234,15 @@ TEST(Trainer, TargetsFromMapsAreCutAtTheSamePairs) {
   }
   const cv::Mat neutral = ReadImage(dir / actor / "neutral.exr");
   EXPECT_EQ(cv::countNonZero(neutral != 0), 0);  // D*(0) = 0
+  // The exact detail (ray-cast from the compatible surface to the scan) agrees with
+  // D* in the wrinkle band on the brow raise, and is not D^j.
+  const ExtractionTruthRow& brow = report.rows[1];
+  std::printf("brow raise, wrinkle band, against the exact detail: D* %.3f, D^j %.3f (%d texels)\n",
+              brow.exact_detail_band.correlation, brow.exact_extracted_band.correlation,
+              brow.exact_detail_band.texels);
+  EXPECT_GT(brow.exact_detail_band.texels, 1000);
+  EXPECT_GT(brow.exact_detail_band.correlation, 0.7);  // measured 0.911
+  EXPECT_LT(brow.exact_extracted_band.correlation, 0.999);
 
   o.training_targets = TrainingTargets::kMaps;
   o.target_maps = dir.string();
