@@ -56,6 +56,7 @@ void CaptureEvalOptions::VisitFields(OptionVisitor& v) {
   v.Field("wrinkle_regions", wrinkle_regions);
   v.Field("surface_max_distance_mm", surface_max_distance_mm);
   v.Field("surface_mesh_resolution", surface_mesh_resolution);
+  v.Field("surface_phong_alpha", surface_phong_alpha);
   v.Field("max_frames", max_frames);
   v.Field("active_reference_rms_mm", active_reference_rms_mm);
   v.Field("offset_region", offset_region);
@@ -803,6 +804,7 @@ void CaptureEvalContext::SetUpSurfaceTruth() {
   actor.emplace(truth_rig, *truth_actor);
   HifiMeshOptions ho;
   ho.hifi_mesh_resolution = options.surface_mesh_resolution;
+  ho.phong_alpha = options.surface_phong_alpha;
   hifi = std::make_unique<HifiMeshBuilder>(rig, ho);
 }
 

@@ -100,6 +100,9 @@ struct CaptureEvalOptions {
   double surface_max_distance_mm = 5.0;
   // Resolution of the H^t grid rebuilt for the surface metrics (hifi_mesh_resolution).
   int surface_mesh_resolution = 256;
+  // The base of that H^t: its triangles Phong-tessellated with this shape factor
+  // (HifiMeshOptions::phong_alpha; 0 = flat, as the capture's default).
+  double surface_phong_alpha = 0.0;
   int max_frames = -1;  // evaluate at most this many frames (−1 = all)
   // A frame counts as active for the pooled displacement metrics when the true
   // wrinkle-band RMS over the wrinkle regions reaches this, mm.

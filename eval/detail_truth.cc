@@ -67,9 +67,11 @@ cv::Mat DetailTruth::Detail(const Eigen::VectorXd& expression) const {
 
 namespace {
 
-// Per texel of `raster`, the signed distance along the interpolated normal from the
-// flat-interpolated `coarse` to `surface`; NaN where no surface is within max_mm.
-cv::Mat DistanceAlongNormals(const UvRaster& raster, const TriMesh& coarse, const TriMesh& surface, double max_mm) {
+// Per texel of `raster`, the signed distance along the interpolated normal from
+// `coarse` (its triangles Phong-tessellated with shape factor `phong_alpha`, as
+// synth/hires_surface.h; 0 = flat) to `surface`; NaN where no surface is within max_mm.
+cv::Mat DistanceAlongNormals(const UvRaster& raster, const TriMesh& coarse, const TriMesh& surface, double max_mm,
+                             double phong_alpha) {
   const MatX3d N = VertexNormals(coarse);
   RayCasterOptions robust;
   robust.robust = true;
@@ -79,12 +81,17 @@ cv::Mat DistanceAlongNormals(const UvRaster& raster, const TriMesh& coarse, cons
   for (int k = 0; k < raster.width * raster.height; ++k) {
     const int t = raster.triangle[k];
     if (t < 0) continue;
-    Eigen::Vector3d p = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::Zero();
+    Eigen::Vector3d p = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::Zero(), phong = Eigen::Vector3d::Zero();
     for (int c = 0; c < 3; ++c) {
       p += raster.barycentric[k][c] * coarse.V.row(coarse.F(t, c)).transpose();
       n += raster.barycentric[k][c] * N.row(coarse.F(t, c)).transpose();
     }
     if (!(n.norm() > 0.0)) continue;
+    for (int c = 0; c < 3; ++c) {
+      const Eigen::Vector3d v = coarse.V.row(coarse.F(t, c)).transpose(), nk = N.row(coarse.F(t, c)).transpose();
+      phong += raster.barycentric[k][c] * (p - (p - v).dot(nk) * nk);
+    }
+    p = (1.0 - phong_alpha) * p + phong_alpha * phong;
     origins.push_back(p.cast<float>());
     directions.push_back(n.normalized().cast<float>());
     texel.push_back(k);
@@ -101,13 +108,15 @@ cv::Mat DistanceAlongNormals(const UvRaster& raster, const TriMesh& coarse, cons
 }  // namespace
 
 cv::Mat DetailTruth::ExactDetail(const Eigen::VectorXd& expression, const TriMesh& surface,
-                                 const TriMesh& neutral_surface, double max_mm) const {
+                                 const TriMesh& neutral_surface, double phong_alpha, double max_mm) const {
+  Require(phong_alpha >= 0.0 && phong_alpha <= 1.0,
+          fmt::format("exact detail: phong_alpha = {} must be in [0, 1]", phong_alpha));
   const Eigen::VectorXd identity = ZeroPadded(model_.actor().identity, compatible_.num_identity());
   const Eigen::VectorXd w = ZeroPadded(expression, compatible_.num_expressions());
   const TriMesh coarse = compatible_.Evaluate(identity, w);
   const TriMesh neutral = compatible_.Evaluate(identity, Eigen::VectorXd::Zero(compatible_.num_expressions()));
-  return DistanceAlongNormals(raster_, coarse, surface, max_mm) -
-         DistanceAlongNormals(raster_, neutral, neutral_surface, max_mm);
+  return DistanceAlongNormals(raster_, coarse, surface, max_mm, phong_alpha) -
+         DistanceAlongNormals(raster_, neutral, neutral_surface, max_mm, phong_alpha);
 }
 
 }  // namespace crease
@@ -134,8 +143,8 @@ struct ExactScanDetail {
   cv::Mat exact, valid;
 };
 ExactScanDetail ExactOfScan(const DetailTruth& truth, const Eigen::VectorXd& beta, const TriMesh& scan,
-                            const TriMesh& neutral, const cv::Mat& mask) {
-  ExactScanDetail e{truth.ExactDetail(beta, scan, neutral), mask.clone()};
+                            const TriMesh& neutral, const cv::Mat& mask, double phong_alpha) {
+  ExactScanDetail e{truth.ExactDetail(beta, scan, neutral, phong_alpha), mask.clone()};
   e.valid.setTo(0, e.exact != e.exact);  // NaN: no surface within reach
   e.exact.setTo(0.0f, e.valid == 0);
   return e;
@@ -225,7 +234,7 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
       row.detail_regions = CompareMaps(d.displacement, detail, region_mask);
       row.detail_regions_band = CompareMaps(db, detail_b, region_mask);
       row.coarse_band_rms_mm = CompareMaps(band, cv::Mat::zeros(band.size(), CV_32F), mask).extracted_rms_mm;
-      const ExactScanDetail exact = ExactOfScan(truth, beta, meshes[j], meshes[0], mask);
+      const ExactScanDetail exact = ExactOfScan(truth, beta, meshes[j], meshes[0], mask, options.exact_phong_alpha);
       AddExactComparison(exact, d.displacement, detail, sigma, &row);
       if (!options.write_truth.empty()) {
         WriteScanTruth(options.write_truth / sa.name, scan.name, d.displacement, detail, mask, exact, sigma);

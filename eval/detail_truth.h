@@ -75,8 +75,11 @@ class DetailTruth {
   // brow raise / frown / smile / sneer, Sec. 4.1's D^j at 0.83 / 0.71 / 0.62 / 0.60;
   // on smiles the exact detail is dominated by the coarse facets' rounding, which D*
   // leaves out (README, "Which of the two is right").
+  // `phong_alpha` > 0: the compatible surface's triangles Phong-tessellated as the
+  // studio's (synth/hires_surface.h) instead of flat: what L~^t lacks if H^t's base
+  // were rounded alike.
   cv::Mat ExactDetail(const Eigen::VectorXd& expression, const TriMesh& surface, const TriMesh& neutral_surface,
-                      double max_mm = 2.0) const;
+                      double phong_alpha = 0.0, double max_mm = 2.0) const;
 
   int resolution() const { return raster_.width; }
   const ActorModel& model() const { return model_; }
@@ -124,6 +127,8 @@ struct ExtractionTruthOptions {
   // targets of TrainingOptions training_targets = maps; and <scan>.png, D^j, D* and
   // D^j − D* side by side (above: as they are; below: their wrinkle band). Empty: none.
   std::filesystem::path write_truth;
+  // The exact detail's base surface: 0 = flat, as H^t's (DetailTruth::ExactDetail).
+  double exact_phong_alpha = 0.0;
 };
 // `scans`: a folder from `crease synth scans` (each actor folder holds actor.json,
 // each scan truth.json; the set names its rig). Errors name the file.

@@ -98,6 +98,35 @@ TEST(HifiMesh, ZeroDisplacementLiesOnTheCoarseSurface) {
   }
 }
 
+// Difference 3: a Phong base (the studio's α = 0.75) leaves the coarse vertices in
+// place and bulges the flat triangles outwards on the convex face by a fraction of a
+// millimetre; α = 0 is the flat base, byte for byte.
+TEST(HifiMesh, PhongBaseRoundsTheFacetsOutwardsOnAConvexFace) {
+  const MatX3d V = Posed();
+  const cv::Mat zero(128, 128, CV_32F, cv::Scalar(0));
+  const TriMesh flat = Builder256().Build(V, zero);
+  HifiMeshOptions explicit_flat = Options(256);
+  explicit_flat.phong_alpha = 0.0;
+  EXPECT_EQ(HifiMeshBuilder(Rig(), explicit_flat).Build(V, zero).V, flat.V);
+  HifiMeshOptions rounded = Options(256);
+  rounded.phong_alpha = 0.75;
+  const TriMesh phong = HifiMeshBuilder(Rig(), rounded).Build(V, zero);
+  ASSERT_EQ(phong.num_vertices(), flat.num_vertices());
+  double mean_out = 0.0, max_move = 0.0;
+  for (int v = 0; v < flat.num_vertices(); ++v) {
+    const Eigen::RowVector3d d = phong.V.row(v) - flat.V.row(v);
+    mean_out += d.dot(flat.N.row(v));
+    max_move = std::max(max_move, d.norm());
+  }
+  mean_out /= flat.num_vertices();
+  std::printf("Phong base (alpha 0.75): mean offset along the normal %.4f mm, max move %.4f mm\n", mean_out, max_move);
+  EXPECT_GT(mean_out, 0.0);
+  EXPECT_GT(max_move, 1e-3);
+  EXPECT_LT(max_move, 2.0);
+  rounded.phong_alpha = 1.5;
+  EXPECT_THROW(HifiMeshBuilder(Rig(), rounded), Error);
+}
+
 TEST(HifiMesh, ConstantDisplacementMovesEveryVertexAlongTheNormal) {
   const HifiMeshBuilder& b = Builder256();
   const MatX3d V = Posed();

@@ -84,6 +84,7 @@ void AddTrainCommand(CLI::App& app) {
 // eval-extraction
 struct EvalExtractionArgs {
   std::string scans, config, json_out, write_truth;
+  double exact_phong_alpha = 0.0;
   std::vector<std::string> sets;
   int actors = 0;
 };
@@ -97,6 +98,7 @@ void RunEvalExtraction(const EvalExtractionArgs& a) {
   o.band_mm = training.validation_band_mm;
   o.max_actors = a.actors;
   o.write_truth = a.write_truth;
+  o.exact_phong_alpha = a.exact_phong_alpha;
   const ExtractionTruthReport r = EvaluateExtraction(a.scans, o);
   std::printf("%s%zu scans in %.1f s\n", r.ToTable().c_str(), r.rows.size(), r.seconds);
   if (!a.json_out.empty()) WriteFileAtomic(a.json_out, [&](std::ostream& out) { out << r.ToJson() << "\n"; });
@@ -115,6 +117,10 @@ void AddEvalExtractionCommand(CLI::App& app) {
   cmd->add_option("--write-truth", a->write_truth,
                   "Also write each scan's D* as DIR/<actor>/<scan>.exr (the targets of `crease train --set "
                   "training_targets=maps --set target_maps=DIR`)");
+  cmd->add_option("--exact-phong-alpha", a->exact_phong_alpha,
+                  "The exact detail's base: the compatible surface Phong-tessellated with this shape factor (0 = "
+                  "flat, as H^t's base; the studio's surface uses 0.75)")
+      ->capture_default_str();
   cmd->callback([a] { RunEvalExtraction(*a); });
 }
 

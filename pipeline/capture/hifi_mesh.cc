@@ -16,15 +16,35 @@
 
 namespace crease {
 
-void HifiMeshOptions::VisitFields(OptionVisitor& v) { v.Field("resolution", hifi_mesh_resolution); }
+void HifiMeshOptions::VisitFields(OptionVisitor& v) {
+  v.Field("resolution", hifi_mesh_resolution);
+  v.Field("phong_alpha", phong_alpha);
+}
 
 void HifiMeshOptions::Check() const {
   const char* o = "HifiMeshOptions";
   CheckGe(o, "hifi_mesh_resolution", hifi_mesh_resolution, 2);
   CheckLe(o, "hifi_mesh_resolution", hifi_mesh_resolution, 8192);
+  CheckGe(o, "phong_alpha", phong_alpha, 0.0);
+  CheckLe(o, "phong_alpha", phong_alpha, 1.0);
 }
 
 namespace {
+
+// Difference 3: p ← (1 − α) p + α Σ_k b_k (p − ((p − V_k)·N̂_k) N̂_k), the Phong
+// tessellation of the triangle (V_k, N̂_k unit) at barycentrics b.
+inline void PhongTessellate(double alpha, double b0, double b1, double b2, const double* v0, const double* v1,
+                            const double* v2, const double* u0, const double* u1, const double* u2, double p[3]) {
+  const double b[3] = {b0, b1, b2};
+  const double* v[3] = {v0, v1, v2};
+  const double* u[3] = {u0, u1, u2};
+  double q[3] = {0.0, 0.0, 0.0};
+  for (int k = 0; k < 3; ++k) {
+    const double d = (p[0] - v[k][0]) * u[k][0] + (p[1] - v[k][1]) * u[k][1] + (p[2] - v[k][2]) * u[k][2];
+    for (int c = 0; c < 3; ++c) q[c] += b[k] * (p[c] - d * u[k][c]);
+  }
+  for (int c = 0; c < 3; ++c) p[c] = (1.0 - alpha) * p[c] + alpha * q[c];
+}
 
 // Orientation of the chart in UV (u right, v down): true when counter-clockwise
 // (outward) triangles have negative UV area, by majority.
@@ -206,6 +226,7 @@ struct HifiMeshBuilder::Impl {
   std::vector<int> vertex_face_offset;
   std::vector<int> vertex_faces;
   std::vector<int> coarse_F_flat;  // coarse_F row-major, 3 per triangle
+  double phong_alpha = 0.0;        // HifiMeshOptions::phong_alpha (Difference 3)
 
   void Fill(const MatX3d& V, const cv::Mat& D, TriMesh* mesh) const;
 };
@@ -216,6 +237,7 @@ HifiMeshBuilder::HifiMeshBuilder(const FaceRig& rig, const HifiMeshOptions& opti
   ValidateMesh(rig.neutral, "HifiMeshBuilder rig.neutral", {.uv = true});
   Impl& m = *impl_;
   m.N = options.hifi_mesh_resolution;
+  m.phong_alpha = options.phong_alpha;
   m.num_rig_vertices = rig.num_vertices();
   m.normals = std::make_unique<RigVertexNormals>(rig.neutral);
   TriMesh chart;
@@ -309,6 +331,11 @@ void HifiMeshBuilder::Impl::Fill(const MatX3d& V, const cv::Mat& D, TriMesh* mes
   // Raw pointers: the stores below must not make the compiler reload everything.
   const double* const Vp = V.data();
   const double* const Np = coarse_normals.data();
+  // Difference 3: the unit vertex normals the Phong tessellation projects on.
+  const double alpha = phong_alpha;
+  MatX3d unit_normals;
+  if (alpha > 0.0) unit_normals = coarse_normals.rowwise().normalized();
+  const double* const Up = unit_normals.data();
   const int* const cF = coarse_F_flat.data();
   const int* const tri_p = tri.data();
   const Eigen::Vector3f* const w_p = w.data();
@@ -336,6 +363,8 @@ void HifiMeshBuilder::Impl::Fill(const MatX3d& V, const cv::Mat& D, TriMesh* mes
           p[c] = b0 * v0[c] + b1 * v1[c] + b2 * v2[c];
           n[c] = b0 * n0[c] + b1 * n1[c] + b2 * n2[c];
         }
+        if (alpha > 0.0) PhongTessellate(alpha, b0, b1, b2, v0, v1, v2, Up + 3 * static_cast<size_t>(t[0]),
+                                         Up + 3 * static_cast<size_t>(t[1]), Up + 3 * static_cast<size_t>(t[2]), p);
         const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         const double inv_len = len > 0.0 ? 1.0 / len : 0.0;
         // Bilinear sample at the grid vertex's UV (texel centres at (i + 0.5)/R).

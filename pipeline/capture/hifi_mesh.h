@@ -38,6 +38,13 @@
 //      displacement direction is the interpolated (Phong) normal of L~^t.
 //   2. Grid vertices exist only where the chart covers the texel centre, so the
 //      dense mesh's boundary lies up to one grid cell inside the chart's boundary.
+//   3. Optionally (phong_alpha > 0) the base under the displacement is a Phong
+//      tessellation of L~^t instead of its flat triangles. On the studio's surface
+//      (rounded with α = 0.75) the detail a flat base leaves to D^t includes the
+//      change of the facets' rounding with the expression, which neither D* nor the
+//      regression holds (eval/detail_truth.h, ExactDetail: D* agrees with the exact
+//      detail of a Phong base at 0.92 / 0.87 / 0.64 on brow raise / frown / smile,
+//      with that of a flat base at 0.76 / 0.75 / 0.39).
 #pragma once
 
 #include <memory>
@@ -57,6 +64,12 @@ struct HifiMeshOptions {
   // N: UV grid of the dense mesh, vertices per side (the paper's GPU tessellation
   // level is not given; 512 puts a vertex every ~0.5 mm on a typical face).
   int hifi_mesh_resolution = 512;
+  // Shape factor α of a Phong tessellation of L~^t's triangles under the grid
+  // (Boubekeur and Alexa 2008, as the studio rounds its surface, synth/hires_surface.h):
+  //   p_g = (1 − α) Σ w·V + α Σ_k w_k (p − ((p − V_k)·N̂_k) N̂_k)
+  // 0 (the default) = the flat triangles. Not in the paper (its GPU tessellation is
+  // not specified); see Difference 3.
+  double phong_alpha = 0.0;
 
   void VisitFields(OptionVisitor& v);
   void Check() const;
