@@ -44,7 +44,9 @@
 //      change of the facets' rounding with the expression, which neither D* nor the
 //      regression holds (eval/detail_truth.h, ExactDetail: D* agrees with the exact
 //      detail of a Phong base at 0.92 / 0.87 / 0.64 on brow raise / frown / smile,
-//      with that of a flat base at 0.76 / 0.75 / 0.39).
+//      with that of a flat base at 0.76 / 0.75 / 0.39). Its cost (bench/
+//      frame_texture_bench.cc, N = 512, 2-vCPU AMD EPYC, idle, median of 7): BuildInto
+//      9.8 / 5.8 ms with 1 / 2 threads against 7.5 / 4.0 ms flat.
 #pragma once
 
 #include <memory>
