@@ -41,6 +41,22 @@ class OptionVisitor;
 // by the normal must check.
 MatX3d VertexNormals(const TriMesh& mesh);
 
+// Phong tessellation (Boubekeur and Alexa 2008) of a triangle with vertices v[k]
+// and unit vertex normals n[k], at barycentrics b with shape factor α (0 = the flat
+// triangle): p, given as the flat point Σ_k b_k v_k, becomes
+//   (1 − α) p + α Σ_k b_k (p − ((p − v_k)·n_k) n_k).
+// One copy for the studio's surface (synth/hires_surface.h), H^t's optional base
+// (pipeline/capture/hifi_mesh.h) and the exact detail (eval/detail_truth.h).
+inline void PhongTessellate(double alpha, const double b[3], const double* const v[3], const double* const n[3],
+                            double p[3]) {
+  double q[3] = {0.0, 0.0, 0.0};
+  for (int k = 0; k < 3; ++k) {
+    const double d = (p[0] - v[k][0]) * n[k][0] + (p[1] - v[k][1]) * n[k][1] + (p[2] - v[k][2]) * n[k][2];
+    for (int c = 0; c < 3; ++c) q[c] += b[k] * (p[c] - d * n[k][c]);
+  }
+  for (int c = 0; c < 3; ++c) p[c] = (1.0 - alpha) * p[c] + alpha * q[c];
+}
+
 // Cotangent Laplacian, #V×#V, symmetric, positive semi-definite, rows sum to 0:
 //   (L x)_i = Σ_j w_ij (x_i − x_j),  w_ij = (cot α_ij + cot β_ij) / 2,
 // α_ij, β_ij the angles opposite edge ij (one angle on a boundary edge). This is

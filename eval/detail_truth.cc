@@ -81,17 +81,18 @@ cv::Mat DistanceAlongNormals(const UvRaster& raster, const TriMesh& coarse, cons
   for (int k = 0; k < raster.width * raster.height; ++k) {
     const int t = raster.triangle[k];
     if (t < 0) continue;
-    Eigen::Vector3d p = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::Zero(), phong = Eigen::Vector3d::Zero();
+    Eigen::Vector3d p = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::Zero();
     for (int c = 0; c < 3; ++c) {
       p += raster.barycentric[k][c] * coarse.V.row(coarse.F(t, c)).transpose();
       n += raster.barycentric[k][c] * N.row(coarse.F(t, c)).transpose();
     }
     if (!(n.norm() > 0.0)) continue;
-    for (int c = 0; c < 3; ++c) {
-      const Eigen::Vector3d v = coarse.V.row(coarse.F(t, c)).transpose(), nk = N.row(coarse.F(t, c)).transpose();
-      phong += raster.barycentric[k][c] * (p - (p - v).dot(nk) * nk);
-    }
-    p = (1.0 - phong_alpha) * p + phong_alpha * phong;
+    const double b[3] = {raster.barycentric[k][0], raster.barycentric[k][1], raster.barycentric[k][2]};
+    const double* const v[3] = {coarse.V.row(coarse.F(t, 0)).data(), coarse.V.row(coarse.F(t, 1)).data(),
+                                coarse.V.row(coarse.F(t, 2)).data()};
+    const double* const nk[3] = {N.row(coarse.F(t, 0)).data(), N.row(coarse.F(t, 1)).data(),
+                                 N.row(coarse.F(t, 2)).data()};
+    PhongTessellate(phong_alpha, b, v, nk, p.data());
     origins.push_back(p.cast<float>());
     directions.push_back(n.normalized().cast<float>());
     texel.push_back(k);
@@ -107,16 +108,18 @@ cv::Mat DistanceAlongNormals(const UvRaster& raster, const TriMesh& coarse, cons
 
 }  // namespace
 
-cv::Mat DetailTruth::ExactDetail(const Eigen::VectorXd& expression, const TriMesh& surface,
-                                 const TriMesh& neutral_surface, double phong_alpha, double max_mm) const {
+cv::Mat DetailTruth::SurfaceDistance(const Eigen::VectorXd& expression, const TriMesh& surface, double phong_alpha,
+                                     double max_mm) const {
   Require(phong_alpha >= 0.0 && phong_alpha <= 1.0,
           fmt::format("exact detail: phong_alpha = {} must be in [0, 1]", phong_alpha));
   const Eigen::VectorXd identity = ZeroPadded(model_.actor().identity, compatible_.num_identity());
   const Eigen::VectorXd w = ZeroPadded(expression, compatible_.num_expressions());
-  const TriMesh coarse = compatible_.Evaluate(identity, w);
-  const TriMesh neutral = compatible_.Evaluate(identity, Eigen::VectorXd::Zero(compatible_.num_expressions()));
-  return DistanceAlongNormals(raster_, coarse, surface, max_mm, phong_alpha) -
-         DistanceAlongNormals(raster_, neutral, neutral_surface, max_mm, phong_alpha);
+  return DistanceAlongNormals(raster_, compatible_.Evaluate(identity, w), surface, max_mm, phong_alpha);
+}
+
+cv::Mat DetailTruth::ExactDetail(const Eigen::VectorXd& expression, const TriMesh& surface,
+                                 const cv::Mat& neutral_distance, double phong_alpha, double max_mm) const {
+  return SurfaceDistance(expression, surface, phong_alpha, max_mm) - neutral_distance;
 }
 
 }  // namespace crease
@@ -137,34 +140,31 @@ Eigen::VectorXd ReadTruthExpression(const FaceRig& rig, const std::filesystem::p
 
 namespace {
 
-// The exact detail of a scan (DetailTruth::ExactDetail) and the texels where it
-// and `mask` are valid; 0 elsewhere.
+// A scan's exact detail (DetailTruth::ExactDetail) beside D^j and D*, all three in
+// the wrinkle band over `valid`: the texels of `mask` where the exact detail is
+// defined (a ray found the surface).
 struct ExactScanDetail {
-  cv::Mat exact, valid;
+  cv::Mat valid, exact_band, extracted_band, detail_band;
 };
-ExactScanDetail ExactOfScan(const DetailTruth& truth, const Eigen::VectorXd& beta, const TriMesh& scan,
-                            const TriMesh& neutral, const cv::Mat& mask, double phong_alpha) {
-  ExactScanDetail e{truth.ExactDetail(beta, scan, neutral, phong_alpha), mask.clone()};
-  e.valid.setTo(0, e.exact != e.exact);  // NaN: no surface within reach
-  e.exact.setTo(0.0f, e.valid == 0);
-  return e;
-}
-
-// D^j and D* against the exact detail, in the wrinkle band over its valid texels.
-void AddExactComparison(const ExactScanDetail& e, const cv::Mat& extracted, const cv::Mat& detail, double sigma,
-                        ExtractionTruthRow* row) {
+ExactScanDetail ExactOfScan(cv::Mat exact, const cv::Mat& mask, const cv::Mat& extracted, const cv::Mat& detail,
+                            double sigma) {
+  ExactScanDetail e{mask.clone(), {}, {}, {}};
+  e.valid.setTo(0, exact != exact);  // NaN: no surface within reach
+  exact.setTo(0.0f, e.valid == 0);
   const WrinkleBandMask bm = MakeWrinkleBandMask(e.valid, sigma);
-  const cv::Mat exact_band = WrinkleBand(e.exact, bm);
-  row->exact_extracted_band = CompareMaps(WrinkleBand(extracted, bm), exact_band, e.valid);
-  row->exact_detail_band = CompareMaps(WrinkleBand(detail, bm), exact_band, e.valid);
+  e.exact_band = WrinkleBand(exact, bm);
+  e.extracted_band = WrinkleBand(extracted, bm);
+  e.detail_band = WrinkleBand(detail, bm);
+  return e;
 }
 
 // `dir`/SCAN.exr: the scan's D* (mm); `dir`/SCAN.png, half size, on one colour range
 // of three times D*'s RMS (at least 0.02 mm): D^j, D* and D^j − D* (top: as they are;
-// middle: their wrinkle band); bottom: the exact detail's band (ExactDetail), D^j's
-// band minus it, D*'s band minus it.
+// middle: their wrinkle band, `extracted_band` and `detail_band`); bottom: the exact
+// detail's band, D^j's band minus it, D*'s band minus it.
 void WriteScanTruth(const std::filesystem::path& dir, const std::string& scan, const cv::Mat& extracted,
-                    const cv::Mat& detail, const cv::Mat& mask, const ExactScanDetail& e, double sigma) {
+                    const cv::Mat& detail, const cv::Mat& mask, const cv::Mat& extracted_band,
+                    const cv::Mat& detail_band, const ExactScanDetail& e) {
   std::filesystem::create_directories(dir);
   WriteImage(dir / (scan + ".exr"), detail);
   const double rms = CompareMaps(detail, cv::Mat::zeros(detail.size(), CV_32F), mask).extracted_rms_mm;
@@ -176,12 +176,11 @@ void WriteScanTruth(const std::filesystem::path& dir, const std::string& scan, c
                 out);
     return out;
   };
-  const WrinkleBandMask bm = MakeWrinkleBandMask(mask, sigma), be = MakeWrinkleBandMask(e.valid, sigma);
-  const cv::Mat xb = WrinkleBand(extracted, bm), db = WrinkleBand(detail, bm);
-  const cv::Mat eb = WrinkleBand(e.exact, be), xe = WrinkleBand(extracted, be), de = WrinkleBand(detail, be);
   cv::Mat picture, half;
-  cv::vconcat(std::vector<cv::Mat>{row(extracted, detail, extracted - detail, mask), row(xb, db, xb - db, mask),
-                                   row(eb, xe - eb, de - eb, e.valid)},
+  cv::vconcat(std::vector<cv::Mat>{row(extracted, detail, extracted - detail, mask),
+                                   row(extracted_band, detail_band, extracted_band - detail_band, mask),
+                                   row(e.exact_band, e.extracted_band - e.exact_band, e.detail_band - e.exact_band,
+                                       e.valid)},
               picture);
   cv::resize(picture, half, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
   WriteImage(dir / (scan + ".png"), half, {.srgb = false});
@@ -212,6 +211,8 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
     const DetailExtractor extractor(meshes[0], options.detail, sa.scans[sa.neutral].mesh.string(), others);
     const double sigma = options.band_mm / std::max(MmPerTexel(meshes[0], R), 1e-9);
     const cv::Mat regions = ValidRegionMask(rig.regions, options.regions, R, extractor.coverage());
+    const Eigen::VectorXd neutral_beta = Eigen::VectorXd::Zero(rig.num_expressions());
+    const cv::Mat neutral_distance = truth.SurfaceDistance(neutral_beta, meshes[0], options.exact_phong_alpha);
     for (size_t j = 0; j < meshes.size(); ++j) {
       const ScanEntry& scan = sa.scans[order[j]];
       const Eigen::VectorXd beta = ReadTruthExpression(rig, scan.mesh.parent_path() / "truth.json");
@@ -234,10 +235,13 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
       row.detail_regions = CompareMaps(d.displacement, detail, region_mask);
       row.detail_regions_band = CompareMaps(db, detail_b, region_mask);
       row.coarse_band_rms_mm = CompareMaps(band, cv::Mat::zeros(band.size(), CV_32F), mask).extracted_rms_mm;
-      const ExactScanDetail exact = ExactOfScan(truth, beta, meshes[j], meshes[0], mask, options.exact_phong_alpha);
-      AddExactComparison(exact, d.displacement, detail, sigma, &row);
+      const ExactScanDetail exact =
+          ExactOfScan(truth.ExactDetail(beta, meshes[j], neutral_distance, options.exact_phong_alpha), mask,
+                      d.displacement, detail, sigma);
+      row.exact_extracted_band = CompareMaps(exact.extracted_band, exact.exact_band, exact.valid);
+      row.exact_detail_band = CompareMaps(exact.detail_band, exact.exact_band, exact.valid);
       if (!options.write_truth.empty()) {
-        WriteScanTruth(options.write_truth / sa.name, scan.name, d.displacement, detail, mask, exact, sigma);
+        WriteScanTruth(options.write_truth / sa.name, scan.name, d.displacement, detail, mask, db, detail_b, exact);
       }
       report.rows.push_back(row);
     }

@@ -63,22 +63,25 @@ class DetailTruth {
   cv::Mat CoarseBand(const Eigen::VectorXd& expression) const;
   // D*(β) = Wrinkles + CoarseBand.
   cv::Mat Detail(const Eigen::VectorXd& expression) const;
-  // A check of D* without its first-order model: per texel, the signed distance along
-  // the interpolated normal from the compatible surface at (α, β) — its vertices
-  // interpolated flat, as H^t is built on L~^t (pipeline/capture/hifi_mesh.h) — to
-  // `surface`, the true high-resolution surface at β (a scan's mesh, head frame),
-  // minus the same from the compatible neutral to `neutral_surface`: exactly what
-  // L~^t at the true weights lacks beyond the neutral, the coarse facets and the
-  // studio's Phong rounding included. NaN where a ray finds no surface within
-  // `max_mm` either way. Measured (crease 0.4.16, G = 1 mm, seed 1's four training
+  // Per texel, the signed distance along the interpolated normal from the compatible
+  // surface at (α, β) — its vertices interpolated flat, as H^t is built on L~^t
+  // (pipeline/capture/hifi_mesh.h) — to `surface`, the true high-resolution surface at
+  // β (a scan's mesh, head frame). NaN where a ray finds no surface within `max_mm`
+  // either way. `phong_alpha` > 0: the compatible surface's triangles
+  // Phong-tessellated as the studio's (synth/hires_surface.h) instead of flat.
+  cv::Mat SurfaceDistance(const Eigen::VectorXd& expression, const TriMesh& surface, double phong_alpha = 0.0,
+                          double max_mm = 2.0) const;
+  // A check of D* without its first-order model: SurfaceDistance(β, surface) minus
+  // `neutral_distance`, the same from the compatible neutral to the true neutral
+  // surface (SurfaceDistance(0, neutral surface), computed once per actor): exactly
+  // what L~^t at the true weights lacks beyond the neutral, the coarse facets and the
+  // studio's Phong rounding included. Measured (crease 0.4.16, G = 1 mm, seed 1's four training
   // actors, wrinkle band, mean): D* agrees with it at 0.88 / 0.83 / 0.48 / 0.62 on
   // brow raise / frown / smile / sneer, Sec. 4.1's D^j at 0.83 / 0.71 / 0.62 / 0.60;
   // on smiles the exact detail is dominated by the coarse facets' rounding, which D*
-  // leaves out (README, "Which of the two is right").
-  // `phong_alpha` > 0: the compatible surface's triangles Phong-tessellated as the
-  // studio's (synth/hires_surface.h) instead of flat: what L~^t lacks if H^t's base
-  // were rounded alike.
-  cv::Mat ExactDetail(const Eigen::VectorXd& expression, const TriMesh& surface, const TriMesh& neutral_surface,
+  // leaves out (README, "Which of the two is right"). With `phong_alpha` > 0 (both
+  // distances alike): what L~^t lacks if H^t's base were rounded as the studio's.
+  cv::Mat ExactDetail(const Eigen::VectorXd& expression, const TriMesh& surface, const cv::Mat& neutral_distance,
                       double phong_alpha = 0.0, double max_mm = 2.0) const;
 
   int resolution() const { return raster_.width; }

@@ -8,6 +8,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/error.h"
+#include "core/mesh_ops.h"
 #include "core/uv_raster.h"
 #include "synth/wrinkles.h"
 
@@ -164,14 +165,13 @@ inline void CoarseAt(const HiResLayout& layout, const TriMesh& coarse, int v, do
   const int t = layout.triangle[v];
   const Eigen::Vector3f& b = layout.barycentric[v];
   const int i0 = coarse.F(t, 0), i1 = coarse.F(t, 1), i2 = coarse.F(t, 2);
-  const Eigen::RowVector3d p = b[0] * coarse.V.row(i0) + b[1] * coarse.V.row(i1) + b[2] * coarse.V.row(i2);
-  Eigen::RowVector3d phong = Eigen::RowVector3d::Zero();
-  for (int k = 0; k < 3; ++k) {
-    const int i = coarse.F(t, k);
-    const Eigen::RowVector3d nk = coarse.N.row(i);
-    phong += b[k] * (p - (p - coarse.V.row(i)).dot(nk) * nk);
-  }
-  *P = (1.0 - phong_alpha) * p + phong_alpha * phong;
+  const Eigen::RowVector3d flat = b[0] * coarse.V.row(i0) + b[1] * coarse.V.row(i1) + b[2] * coarse.V.row(i2);
+  const double w[3] = {b[0], b[1], b[2]};
+  const double* const corners[3] = {coarse.V.row(i0).data(), coarse.V.row(i1).data(), coarse.V.row(i2).data()};
+  const double* const normals[3] = {coarse.N.row(i0).data(), coarse.N.row(i1).data(), coarse.N.row(i2).data()};
+  double p[3] = {flat[0], flat[1], flat[2]};
+  PhongTessellate(phong_alpha, w, corners, normals, p);
+  *P = Eigen::RowVector3d(p[0], p[1], p[2]);
   const Eigen::RowVector3d n = b[0] * coarse.N.row(i0) + b[1] * coarse.N.row(i1) + b[2] * coarse.N.row(i2);
   const double len = n.norm();
   *N = len > 0 ? Eigen::RowVector3d(n / len) : Eigen::RowVector3d(0, 0, 0);

@@ -10,6 +10,7 @@
 #include <tbb/parallel_for.h>
 
 #include "core/error.h"
+#include "core/mesh_ops.h"
 #include "core/options.h"
 #include "core/uv_raster.h"
 #include "pipeline/capture/frame_texture.h"
@@ -31,19 +32,14 @@ void HifiMeshOptions::Check() const {
 
 namespace {
 
-// Difference 3: p ← (1 − α) p + α Σ_k b_k (p − ((p − V_k)·N̂_k) N̂_k), the Phong
-// tessellation of the triangle (V_k, N̂_k unit) at barycentrics b.
-inline void PhongTessellate(double alpha, double b0, double b1, double b2, const double* v0, const double* v1,
-                            const double* v2, const double* u0, const double* u1, const double* u2, double p[3]) {
+// Difference 3: core/mesh_ops.h PhongTessellate with the fill loop's scalars (the
+// loop keeps its shape, and its speed without the rounding).
+inline void PhongBase(double alpha, double b0, double b1, double b2, const double* v0, const double* v1,
+                      const double* v2, const double* u0, const double* u1, const double* u2, double p[3]) {
   const double b[3] = {b0, b1, b2};
-  const double* v[3] = {v0, v1, v2};
-  const double* u[3] = {u0, u1, u2};
-  double q[3] = {0.0, 0.0, 0.0};
-  for (int k = 0; k < 3; ++k) {
-    const double d = (p[0] - v[k][0]) * u[k][0] + (p[1] - v[k][1]) * u[k][1] + (p[2] - v[k][2]) * u[k][2];
-    for (int c = 0; c < 3; ++c) q[c] += b[k] * (p[c] - d * u[k][c]);
-  }
-  for (int c = 0; c < 3; ++c) p[c] = (1.0 - alpha) * p[c] + alpha * q[c];
+  const double* const v[3] = {v0, v1, v2};
+  const double* const u[3] = {u0, u1, u2};
+  PhongTessellate(alpha, b, v, u, p);
 }
 
 // Orientation of the chart in UV (u right, v down): true when counter-clockwise
@@ -363,8 +359,8 @@ void HifiMeshBuilder::Impl::Fill(const MatX3d& V, const cv::Mat& D, TriMesh* mes
           p[c] = b0 * v0[c] + b1 * v1[c] + b2 * v2[c];
           n[c] = b0 * n0[c] + b1 * n1[c] + b2 * n2[c];
         }
-        if (alpha > 0.0) PhongTessellate(alpha, b0, b1, b2, v0, v1, v2, Up + 3 * static_cast<size_t>(t[0]),
-                                         Up + 3 * static_cast<size_t>(t[1]), Up + 3 * static_cast<size_t>(t[2]), p);
+        if (alpha > 0.0) PhongBase(alpha, b0, b1, b2, v0, v1, v2, Up + 3 * static_cast<size_t>(t[0]),
+                                   Up + 3 * static_cast<size_t>(t[1]), Up + 3 * static_cast<size_t>(t[2]), p);
         const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         const double inv_len = len > 0.0 ? 1.0 / len : 0.0;
         // Bilinear sample at the grid vertex's UV (texel centres at (i + 0.5)/R).
