@@ -33,7 +33,8 @@ void HifiMeshOptions::Check() const {
 namespace {
 
 // Difference 3: core/mesh_ops.h PhongTessellate with the fill loop's scalars (the
-// loop keeps its shape, and its speed without the rounding).
+// loop keeps its shape, and its speed without the rounding). u0..u2: the corners'
+// unit normals (RigVertexNormals gives unit normals, so the fill loop's own).
 inline void PhongBase(double alpha, double b0, double b1, double b2, const double* v0, const double* v1,
                       const double* v2, const double* u0, const double* u1, const double* u2, double p[3]) {
   const double b[3] = {b0, b1, b2};
@@ -327,11 +328,7 @@ void HifiMeshBuilder::Impl::Fill(const MatX3d& V, const cv::Mat& D, TriMesh* mes
   // Raw pointers: the stores below must not make the compiler reload everything.
   const double* const Vp = V.data();
   const double* const Np = coarse_normals.data();
-  // Difference 3: the unit vertex normals the Phong tessellation projects on.
-  const double alpha = phong_alpha;
-  MatX3d unit_normals;
-  if (alpha > 0.0) unit_normals = coarse_normals.rowwise().normalized();
-  const double* const Up = unit_normals.data();
+  const double alpha = phong_alpha;  // Difference 3
   const int* const cF = coarse_F_flat.data();
   const int* const tri_p = tri.data();
   const Eigen::Vector3f* const w_p = w.data();
@@ -359,8 +356,7 @@ void HifiMeshBuilder::Impl::Fill(const MatX3d& V, const cv::Mat& D, TriMesh* mes
           p[c] = b0 * v0[c] + b1 * v1[c] + b2 * v2[c];
           n[c] = b0 * n0[c] + b1 * n1[c] + b2 * n2[c];
         }
-        if (alpha > 0.0) PhongBase(alpha, b0, b1, b2, v0, v1, v2, Up + 3 * static_cast<size_t>(t[0]),
-                                   Up + 3 * static_cast<size_t>(t[1]), Up + 3 * static_cast<size_t>(t[2]), p);
+        if (alpha > 0.0) PhongBase(alpha, b0, b1, b2, v0, v1, v2, n0, n1, n2, p);
         const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         const double inv_len = len > 0.0 ? 1.0 / len : 0.0;
         // Bilinear sample at the grid vertex's UV (texel centres at (i + 0.5)/R).
