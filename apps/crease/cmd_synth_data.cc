@@ -136,7 +136,7 @@ void AddRenderCommand(CLI::App* synth) {
 struct SequenceArgs {
   std::string rig_path, actor_file, preset, script, out, size, light;
   uint64_t actor_seed = 1, noise_seed = 1;
-  int frames = -1, first = 0, samples = 1;
+  int frames = -1, first = 0, samples = StudioOptions{}.samples_per_axis;
   bool exr = false, no_maps = false, overwrite = false, passes = false;
   double seconds = 0;
   std::vector<std::string> sets;
