@@ -493,6 +493,34 @@ TEST(DetailRegression, WrinkleMapIgnoresOcclusionBorders) {
   EXPECT_EQ(cv::countNonZero(r.Regress(t, cv::Mat()) != 0), 0);
 }
 
+TEST(DetailRegression, ASeenMarginKeepsTheSilhouettesSeamOutOfTheWrinkleMap) {
+  // No lines; the skin darkens gently towards a silhouette (the right fifth of the
+  // chart, never seen), as a cheek turning away does. The seam between the seen texels and their
+  // smooth extension reads as a line unless texels near it do not count
+  // (wrinkle_seen_margin_sigmas, header "Unseen texels"; the tiny model's large σ is 4).
+  cv::Mat t(kS, kS, CV_32F), seen(kS, kS, CV_8U, cv::Scalar(255));
+  const int edge = kS * 4 / 5;
+  for (int y = 0; y < kS; ++y) {
+    for (int x = 0; x < kS; ++x) t.at<float>(y, x) = static_cast<float>(0.5 - 0.3 * std::pow(x / double(edge), 2));
+  }
+  seen.colRange(edge, kS).setTo(0);
+  t.setTo(0.0f, seen == 0);
+  auto patches_near_the_seam = [&](double margin) {
+    DetailRegressionOptions o = SmallOptions();
+    o.wrinkle_seen_margin_sigmas = margin;
+    DetailRegressor r(TinyModel(), {}, Chart(), o);
+    for (int i = 0; i < 4; ++i) r.AddWrinkleFrame(t, seen);
+    r.FixLayout();
+    int near = 0;
+    for (const PatchFrame& f : r.layout().patches) near += f.center_texel.x() > edge - 12;
+    std::printf("seen margin %.1f σ: %d patches, %d within 12 texels of the seam\n", margin, r.layout().num_patches(),
+                near);
+    return near;
+  };
+  EXPECT_GT(patches_near_the_seam(0.0), 0);  // the seam reads as a line
+  EXPECT_EQ(patches_near_the_seam(DetailRegressionOptions().wrinkle_seen_margin_sigmas), 0);
+}
+
 TEST(DetailRegression, MisuseIsAClearError) {
   DetailRegressor r(TinyModel(), {}, Chart(), SmallOptions());
   cv::Mat t, d;

@@ -25,6 +25,7 @@ void DetailRegressionOptions::VisitFields(OptionVisitor& v) {
   v.Field("wrinkle_frames", wrinkle_frames);
   v.Field("wrinkle_min_seen_fraction", wrinkle_min_seen_fraction);
   v.Field("wrinkle_extension_sigma", wrinkle_extension_sigma);
+  v.Field("wrinkle_seen_margin_sigmas", wrinkle_seen_margin_sigmas);
   v.Field("patch_max_unseen_fraction", patch_max_unseen_fraction);
   v.Field("gate_by_response", gate_by_response);
   v.Section("fill", fill);
@@ -37,6 +38,8 @@ void DetailRegressionOptions::Check() const {
   CheckGe(o, "wrinkle_min_seen_fraction", wrinkle_min_seen_fraction, 0.0);
   CheckLe(o, "wrinkle_min_seen_fraction", wrinkle_min_seen_fraction, 1.0);
   CheckGt(o, "wrinkle_extension_sigma", wrinkle_extension_sigma, 0.0);
+  CheckGe(o, "wrinkle_seen_margin_sigmas", wrinkle_seen_margin_sigmas, 0.0);
+  CheckLe(o, "wrinkle_seen_margin_sigmas", wrinkle_seen_margin_sigmas, 16.0);
   CheckGe(o, "patch_max_unseen_fraction", patch_max_unseen_fraction, 0.0);
   CheckLe(o, "patch_max_unseen_fraction", patch_max_unseen_fraction, 1.0);
   fill.Check();
@@ -137,6 +140,22 @@ struct DetailRegressor::Impl {
     cv::Mat seen_chart = coverage.clone();
     if (!seen.empty()) cv::bitwise_and(seen_chart, seen != 0, seen_chart);
     return seen_chart;
+  }
+  // The texels of `seen_chart` at least the seen margin inside it (header
+  // "Unseen texels"): the ones that count for the wrinkle map. The chart's own border
+  // is not a seam (the DoG is normalised over the chart).
+  cv::Mat MapSeen(const cv::Mat& seen_chart) const {
+    const double margin =
+        options.wrinkle_seen_margin_sigmas * model.wrinkle.dog_large_sigma * SigmaScale(model.wrinkle, R);
+    if (margin <= 0.0) return seen_chart;
+    cv::Mat unseen;  // chart texels not seen
+    cv::bitwise_xor(coverage, seen_chart, unseen);
+    if (cv::countNonZero(unseen) == 0) return seen_chart;
+    cv::Mat distance;  // to the nearest unseen chart texel
+    cv::distanceTransform(unseen == 0, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+    cv::Mat inside = distance >= static_cast<float>(margin);
+    cv::bitwise_and(inside, seen_chart, inside);
+    return inside;
   }
   void AddToMap(const cv::Mat& gray, const cv::Mat& seen_chart);
 
@@ -287,7 +306,7 @@ void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen, 
   Require(!m.fixed, "DetailRegressor::AddWrinkleFrame: the layout is already fixed (FixLayout was called)");
   m.RequireFrame(gray, seen, "DetailRegressor::AddWrinkleFrame");
   const cv::Mat seen_chart = m.SeenChart(seen);
-  cv::add(m.seen_count, cv::Scalar(1), m.seen_count, seen_chart);
+  cv::add(m.seen_count, cv::Scalar(1), m.seen_count, m.MapSeen(seen_chart));
   ++m.frames;
   if (!map_texture.empty()) m.RequireFrame(map_texture, cv::Mat(), "DetailRegressor::AddWrinkleFrame map texture");
   if (m.holds()) {  // the map waits for the reference (FixLayout)
@@ -334,7 +353,7 @@ void DetailRegressor::Impl::AddToMap(const cv::Mat& gray, const cv::Mat& seen_ch
     ext.copyTo(clean, seen_chart == 0);
     texture = clean;
   }
-  m.builder->Add(texture, fmt::format("DetailRegressor::AddWrinkleFrame: frame {}", m.frames));
+  m.builder->Add(texture, fmt::format("DetailRegressor::AddWrinkleFrame: frame {}", m.frames), m.MapSeen(seen_chart));
 }
 
 bool DetailRegressor::NeedsWrinkleFrames() const {

@@ -420,11 +420,13 @@ WrinkleMapBuilder::WrinkleMapBuilder(int map_size, const cv::Mat& coverage, cons
   orientation_sum_ = cv::Mat(map_size, map_size, CV_32FC2, cv::Scalar(0, 0));
 }
 
-cv::Mat WrinkleMapBuilder::Add(const cv::Mat& gray_texture, const std::string& what) {
+cv::Mat WrinkleMapBuilder::Add(const cv::Mat& gray_texture, const std::string& what, const cv::Mat& counts) {
   RequireGray(gray_texture, what);
   Require(gray_texture.rows == size_,
           fmt::format("{}: texture is {}x{}, expected {}x{} like the other textures of this wrinkle map", what,
                       gray_texture.cols, gray_texture.rows, size_, size_));
+  Require(counts.empty() || (counts.type() == CV_8UC1 && counts.rows == size_ && counts.cols == size_),
+          fmt::format("{}: the mask of counted texels must be CV_8U {}x{}", what, size_, size_));
   const DogFilter& filter = *filter_;
   const cv::Mat tm = filter.Masked(gray_texture, what);
   cv::Mat r = filter.Response(tm);
@@ -438,8 +440,9 @@ cv::Mat WrinkleMapBuilder::Add(const cv::Mat& gray_texture, const std::string& w
     float* sum = response_sum_.ptr<float>(y);
     int* cnt = count_.ptr<int>(y);
     cv::Vec2f* ori = orientation_sum_.ptr<cv::Vec2f>(y);
+    const uint8_t* k = counts.empty() ? nullptr : counts.ptr<uint8_t>(y);
     for (int x = 0; x < size_; ++x) {
-      if (rp[x] > a) {  // [r_j(p) > α], Sec. 4.2
+      if (rp[x] > a && (k == nullptr || k[x] != 0)) {  // [r_j(p) > α], Sec. 4.2
         sum[x] += rp[x];
         cnt[x] += 1;
         ori[x][0] += px[x] * px[x] - py[x] * py[x];

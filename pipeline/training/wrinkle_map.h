@@ -258,8 +258,9 @@ class WrinkleMapBuilder {
                     const WrinkleMapOptions& options);
 
   // Adds T^j (CV_32FC1 S×S, linear [0, 1]) and returns its DoG response r_j
-  // (for ExtractTrainingPatches). `what` names the texture in errors.
-  cv::Mat Add(const cv::Mat& gray_texture, const std::string& what = "texture");
+  // (for ExtractTrainingPatches). `what` names the texture in errors. `counts`
+  // (CV_8U S×S, optional): only its non-zero texels add to the map.
+  cv::Mat Add(const cv::Mat& gray_texture, const std::string& what = "texture", const cv::Mat& counts = {});
 
   int num_textures() const { return num_textures_; }
   // The map of the textures added so far; throws Error when none was added.
