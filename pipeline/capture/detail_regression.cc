@@ -157,7 +157,8 @@ struct DetailRegressor::Impl {
     cv::bitwise_and(inside, seen_chart, inside);
     return inside;
   }
-  void AddToMap(const cv::Mat& gray, const cv::Mat& seen_chart);
+  // `counted`: MapSeen(seen_chart) when already made (empty: made here).
+  void AddToMap(const cv::Mat& gray, const cv::Mat& seen_chart, cv::Mat counted = {});
 
   // Difference 6's capture reference: the per-texel median of the held frames whose
   // expression is within the smallest quarter (at least one frame).
@@ -306,7 +307,8 @@ void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen, 
   Require(!m.fixed, "DetailRegressor::AddWrinkleFrame: the layout is already fixed (FixLayout was called)");
   m.RequireFrame(gray, seen, "DetailRegressor::AddWrinkleFrame");
   const cv::Mat seen_chart = m.SeenChart(seen);
-  cv::add(m.seen_count, cv::Scalar(1), m.seen_count, m.MapSeen(seen_chart));
+  const cv::Mat counted = m.MapSeen(seen_chart);
+  cv::add(m.seen_count, cv::Scalar(1), m.seen_count, counted);
   ++m.frames;
   if (!map_texture.empty()) m.RequireFrame(map_texture, cv::Mat(), "DetailRegressor::AddWrinkleFrame map texture");
   if (m.holds()) {  // the map waits for the reference (FixLayout)
@@ -316,12 +318,12 @@ void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen, 
     m.held_expression.push_back(std::isfinite(expression) ? expression : 0.0);
     return;
   }
-  m.AddToMap(map_texture.empty() ? gray : map_texture, seen_chart);
+  m.AddToMap(map_texture.empty() ? gray : map_texture, seen_chart, counted);
 }
 
 // The wrinkle map's share of one frame (Sec. 5.2), unseen chart texels extended
 // smoothly from the seen ones.
-void DetailRegressor::Impl::AddToMap(const cv::Mat& gray, const cv::Mat& seen_chart) {
+void DetailRegressor::Impl::AddToMap(const cv::Mat& gray, const cv::Mat& seen_chart, cv::Mat counted) {
   Impl& m = *this;
   cv::Mat texture = gray;
   const int unseen = cv::countNonZero(m.coverage) - cv::countNonZero(seen_chart);
@@ -353,7 +355,8 @@ void DetailRegressor::Impl::AddToMap(const cv::Mat& gray, const cv::Mat& seen_ch
     ext.copyTo(clean, seen_chart == 0);
     texture = clean;
   }
-  m.builder->Add(texture, fmt::format("DetailRegressor::AddWrinkleFrame: frame {}", m.frames), m.MapSeen(seen_chart));
+  if (counted.empty()) counted = m.MapSeen(seen_chart);
+  m.builder->Add(texture, fmt::format("DetailRegressor::AddWrinkleFrame: frame {}", m.frames), counted);
 }
 
 bool DetailRegressor::NeedsWrinkleFrames() const {
