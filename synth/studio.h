@@ -61,7 +61,8 @@ struct StudioOptions {
   // novel actors (seeds 1–3, rung R2, `gated-level`) 2×2 raises D^t's wrinkle band
   // correlation with D* from 0.305 to 0.332 and the still face from 0.78 to 0.85, and
   // lowers L~^t + D^t's band normal error from 1.21 to 1.08 × L~^t's, on every seed
-  // (README, "Pixels that integrate"). Rendering takes about 1.3 × as long.
+  // (README, "Pixels that integrate"). Rendering takes about 4 × as long (a whole
+  // sequence with its files 1.3–2.2 ×).
   int samples_per_axis = 2;
   double subsurface_mm = 0.0;       // skin subsurface blur of the diffuse light (RenderOptions::subsurface_mm)
   int motion_blur_subframes = 5;    // sub-frames over the shutter when the sequence asks for motion blur
