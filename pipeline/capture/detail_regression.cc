@@ -157,6 +157,12 @@ struct DetailRegressor::Impl {
     cv::bitwise_and(inside, seen_chart, inside);
     return inside;
   }
+  // J_p += 1 where a frame's `seen_chart` counts (MapSeen); returns those texels.
+  cv::Mat CountSeen(const cv::Mat& seen_chart) {
+    cv::Mat counted = MapSeen(seen_chart);
+    cv::add(seen_count, cv::Scalar(1), seen_count, counted);
+    return counted;
+  }
   // `counted`: MapSeen(seen_chart) when already made (empty: made here).
   void AddToMap(const cv::Mat& gray, const cv::Mat& seen_chart, cv::Mat counted = {});
 
@@ -307,18 +313,16 @@ void DetailRegressor::AddWrinkleFrame(const cv::Mat& gray, const cv::Mat& seen, 
   Require(!m.fixed, "DetailRegressor::AddWrinkleFrame: the layout is already fixed (FixLayout was called)");
   m.RequireFrame(gray, seen, "DetailRegressor::AddWrinkleFrame");
   const cv::Mat seen_chart = m.SeenChart(seen);
-  const cv::Mat counted = m.MapSeen(seen_chart);
-  cv::add(m.seen_count, cv::Scalar(1), m.seen_count, counted);
-  ++m.frames;
   if (!map_texture.empty()) m.RequireFrame(map_texture, cv::Mat(), "DetailRegressor::AddWrinkleFrame map texture");
-  if (m.holds()) {  // the map waits for the reference (FixLayout)
+  ++m.frames;
+  if (m.holds()) {  // the map and J_p wait for the reference (FixLayout)
     m.held_gray.push_back(gray.clone());
     m.held_seen.push_back(seen_chart);
     m.held_map.push_back(map_texture.empty() ? cv::Mat() : map_texture.clone());
     m.held_expression.push_back(std::isfinite(expression) ? expression : 0.0);
     return;
   }
-  m.AddToMap(map_texture.empty() ? gray : map_texture, seen_chart, counted);
+  m.AddToMap(map_texture.empty() ? gray : map_texture, seen_chart, m.CountSeen(seen_chart));
 }
 
 // The wrinkle map's share of one frame (Sec. 5.2), unseen chart texels extended
@@ -372,12 +376,14 @@ void DetailRegressor::FixLayout() {
   if (m.holds()) {
     m.FixReference();
     for (size_t k = 0; k < m.held_gray.size(); ++k) {
+      const cv::Mat counted = m.CountSeen(m.held_seen[k]);  // J_p from the frame's own mask
       if (!m.held_map[k].empty()) {
-        m.AddToMap(m.held_map[k], m.held_seen[k]);
+        m.AddToMap(m.held_map[k], m.held_seen[k], counted);
         continue;
       }
       const Impl::Frame f = m.Input(m.held_gray[k], m.held_seen[k]);
-      m.AddToMap(f.gray, f.seen);
+      // A warped texture brings its own seen mask (Input); otherwise f.seen is the frame's.
+      m.AddToMap(f.gray, f.seen, m.warps_texture() ? cv::Mat() : counted);
     }
     m.held_gray.clear();
     m.held_seen.clear();
