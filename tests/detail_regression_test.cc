@@ -348,6 +348,42 @@ TEST(DetailRegression, GateLeavesAFrameWithoutLinesFlat) {
   EXPECT_GT(Correlation(D, truth, Chart()), 0.5);
 }
 
+// The soft gate (gate_softness), apart from the cascade: the truth's own patches
+// assembled through the gate (AssembleFromTruth) while the texture's lines deepen by
+// small steps, so that the patches' DoG responses cross α. The hard gate switches
+// the patches on at once and D^t jumps; the soft gate's ramp turns them on over a
+// range of depths. Both leave a frame without lines flat and, with deep lines, keep
+// the patches on them.
+TEST(DetailRegression, TheSoftGateTurnsPatchesOnGradually) {
+  DetailRegressionOptions o = SmallOptions();
+  o.gate_by_response = true;
+  o.gate_softness = 0.0;
+  const DetailRegressor hard = FixedRegressor(o);
+  o.gate_softness = 0.75;
+  const DetailRegressor soft = FixedRegressor(o);
+  cv::Mat t, truth, unused;
+  Frame(0.2, &unused, &truth);
+  auto largest_step = [&](const DetailRegressor& r) {
+    double worst = 0.0;
+    cv::Mat previous;
+    for (int i = 0; i <= 60; ++i) {
+      Frame(0.0025 * i, &t, &unused);
+      const cv::Mat D = r.AssembleFromTruth(t, cv::Mat(), truth);
+      if (!previous.empty()) worst = std::max(worst, cv::norm(D, previous, cv::NORM_INF));
+      previous = D;
+    }
+    return worst;
+  };
+  const double hard_step = largest_step(hard), soft_step = largest_step(soft);
+  std::printf("largest change of D^t between lines 0.0025 apart in depth: hard gate %.4f mm, soft %.4f mm\n",
+              hard_step, soft_step);
+  EXPECT_LT(soft_step, 0.5 * hard_step);
+  Frame(0.0, &t, &unused);
+  EXPECT_EQ(cv::countNonZero(soft.AssembleFromTruth(t, cv::Mat(), truth) != 0), 0);
+  Frame(0.2, &t, &unused);
+  EXPECT_GT(Correlation(soft.Regress(t, cv::Mat()), truth, Chart()), 0.5);
+}
+
 // A static dark stripe (a brow painted in the albedo) in every frame, beside the
 // lines that come and go: read raw, the wrinkle map puts patches on it; flattened by
 // the most neutral wrinkle frame (texture_reference = difference, Difference 6) it

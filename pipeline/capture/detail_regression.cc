@@ -28,6 +28,7 @@ void DetailRegressionOptions::VisitFields(OptionVisitor& v) {
   v.Field("wrinkle_seen_margin_sigmas", wrinkle_seen_margin_sigmas);
   v.Field("patch_max_unseen_fraction", patch_max_unseen_fraction);
   v.Field("gate_by_response", gate_by_response);
+  v.Field("gate_softness", gate_softness);
   v.Section("fill", fill);
   v.Section("reference_alignment", reference_alignment);
 }
@@ -42,6 +43,8 @@ void DetailRegressionOptions::Check() const {
   CheckLe(o, "wrinkle_seen_margin_sigmas", wrinkle_seen_margin_sigmas, 16.0);
   CheckGe(o, "patch_max_unseen_fraction", patch_max_unseen_fraction, 0.0);
   CheckLe(o, "patch_max_unseen_fraction", patch_max_unseen_fraction, 1.0);
+  CheckGe(o, "gate_softness", gate_softness, 0.0);
+  CheckLe(o, "gate_softness", gate_softness, 1.0);
   fill.Check();
   reference_alignment.Check();
 }
@@ -53,6 +56,22 @@ double MsSince(Clock::time_point t) { return std::chrono::duration<double, std::
 
 // Footprint grid of a patch for the seen check: samples a, b ∈ {0, g, 2g, …, w−1}.
 constexpr int kFootprintGrid = 9;
+
+// The soft gate (gate_softness s > 0): a patch's weight w rises linearly from 0 at a
+// DoG response r = (1 − s)α to 1 at (1 + s)α, so that a response near α, which sensor
+// noise moves from frame to frame, moves the patch's share of D^t a little instead of
+// switching it on and off (s = 0: the hard gate, dropped at r ≤ α).
+float GateWeight(float response, float alpha, float softness) {
+  if (!std::isfinite(response)) return 0.0f;
+  const float w = (response - (1.0f - softness) * alpha) / (2.0f * softness * alpha);
+  return std::clamp(w, 0.0f, 1.0f);
+}
+
+// Under the soft gate a texel's merge is divided by its kept share no smaller than
+// this, so that it fades to 0 as the weights of all the patches covering it do,
+// instead of jumping to 0 when the last one reaches w = 0. One of 4 patches at the
+// layout's spacing of about half a patch (PlacePatches) keeps its full value.
+constexpr float kSoftGateShareFloor = 0.25f;
 
 // 1D Gaussian of σ truncated at 3σ (it is normalised per texel anyway: the gate
 // evaluates normalised convolutions like DogResponse, whose OpenCV kernels reach 4σ;
@@ -131,10 +150,11 @@ struct DetailRegressor::Impl {
   struct Prepared {
     Frame input;
     std::vector<uint8_t> drop;
+    std::vector<float> weight;  // the soft gate's w_k (gate_softness > 0; else empty: all 1)
   };
   Prepared Prepare(const cv::Mat& gray, const cv::Mat& seen, DetailTiming* t) const;
-  cv::Mat Assemble(const RowMatrixXf& c, const std::vector<uint8_t>& drop, DetailTiming* t) const;
-  void RenormaliseDropped(const std::vector<uint8_t>& drop, cv::Mat* D) const;
+  cv::Mat Assemble(const RowMatrixXf& c, const Prepared& p, DetailTiming* t) const;
+  void RenormaliseDropped(const Prepared& p, cv::Mat* D) const;
   // The chart texels seen in a frame (coverage ∧ seen; empty seen = all).
   cv::Mat SeenChart(const cv::Mat& seen) const {
     cv::Mat seen_chart = coverage.clone();
@@ -199,11 +219,13 @@ struct DetailRegressor::Impl {
     }
   }
 
-  // Which patches drop out of this frame (header "Unseen texels"): 1 = dropped.
-  std::vector<uint8_t> Drops(const cv::Mat& src, const cv::Mat& seen) const {
+  // Which patches drop out of this frame (header "Unseen texels"): p->drop 1 =
+  // dropped; with gate_softness > 0 also the gate's weights p->weight.
+  void Drops(const cv::Mat& src, const cv::Mat& seen, Prepared* p) const {
     const Impl& m = *this;
     const int N = layout.num_patches();
-    std::vector<uint8_t> drop(N, 0);
+    std::vector<uint8_t>& drop = p->drop;
+    drop.assign(N, 0);
     cv::Mat mask;  // coverage ∧ seen (CV_8U), for the gate
     if (!seen.empty()) {
       const cv::Mat s = seen.isContinuous() ? seen : seen.clone();
@@ -228,17 +250,24 @@ struct DetailRegressor::Impl {
         cv::bitwise_and(m.coverage, s, mask);
       }
       const float alpha = static_cast<float>(m.model.wrinkle.wrinkle_threshold);
+      const float s = static_cast<float>(m.options.gate_softness);
+      if (s > 0.0f) p->weight.assign(N, 1.0f);
       tbb::parallel_for(tbb::blocked_range<int>(0, N, 16), [&](const tbb::blocked_range<int>& r) {
         for (int k = r.begin(); k != r.end(); ++k) {
           if (drop[k]) continue;
           const PatchFrame& f = m.layout.patches[k];
           const int x = std::clamp(static_cast<int>(std::lround(f.center_texel.x())), 0, R - 1);
           const int y = std::clamp(static_cast<int>(std::lround(f.center_texel.y())), 0, R - 1);
-          if (!(m.CentreResponse(src, mask, x, y) > alpha)) drop[k] = 1;
+          const float response = m.CentreResponse(src, mask, x, y);
+          if (s > 0.0f) {
+            p->weight[k] = GateWeight(response, alpha, s);
+            drop[k] = !(p->weight[k] > 0.0f);
+          } else if (!(response > alpha)) {
+            drop[k] = 1;
+          }
         }
       });
     }
-    return drop;
   }
 
   // The optional gate: the DoG response r = G_large * T − G_small * T at texel
@@ -487,11 +516,11 @@ DetailRegressor::Impl::Prepared DetailRegressor::Impl::Prepare(const cv::Mat& gr
                                                                DetailTiming* t) const {
   auto t0 = Clock::now();
   ReferenceAlignmentReport alignment;
-  Prepared p{Input(gray, seen, &alignment), {}};
+  Prepared p{Input(gray, seen, &alignment), {}, {}};
   if (t && (warps_texture() || warps_reference())) t->reference_shift = alignment.mean_shift;
   if (t) t->align_ms = MsSince(t0);
   t0 = Clock::now();
-  p.drop = Drops(p.input.gray, p.input.seen);
+  Drops(p.input.gray, p.input.seen, &p);
   if (t) {
     for (uint8_t d : p.drop) t->dropped += d;
     t->sample_ms += MsSince(t0);
@@ -499,12 +528,14 @@ DetailRegressor::Impl::Prepared DetailRegressor::Impl::Prepare(const cv::Mat& gr
   return p;
 }
 
-// Steps 3–5: d_i = mean + basis · c_i (dropped patches: 0), merged by averaging over
-// the kept patches covering each texel, the uncovered chart texels Poisson-filled.
-cv::Mat DetailRegressor::Impl::Assemble(const RowMatrixXf& c, const std::vector<uint8_t>& drop,
-                                        DetailTiming* t) const {
+// Steps 3–5: d_i = mean + basis · c_i (dropped patches: 0; under the soft gate
+// w_k d_k), merged by averaging over the kept patches covering each texel, the
+// uncovered chart texels Poisson-filled.
+cv::Mat DetailRegressor::Impl::Assemble(const RowMatrixXf& c, const Prepared& p, DetailTiming* t) const {
   const int N = layout.num_patches(), n = layout.patch_size * layout.patch_size;
+  const std::vector<uint8_t>& drop = p.drop;
   const bool any_dropped = std::any_of(drop.begin(), drop.end(), [](uint8_t x) { return x != 0; });
+  const bool any_weak = std::any_of(p.weight.begin(), p.weight.end(), [](float w) { return w < 1.0f; });
   auto t0 = Clock::now();
   Eigen::MatrixXf d(N, n);  // column-major, as Splat takes it
   const Eigen::MatrixXf& basis = model.pca.basis;  // n × D
@@ -515,9 +546,9 @@ cv::Mat DetailRegressor::Impl::Assemble(const RowMatrixXf& c, const std::vector<
       const int j0 = b * kBlock, cols = std::min(kBlock, n - j0);
       d.middleCols(j0, cols).noalias() = c * basis.middleRows(j0, cols).transpose();
       d.middleCols(j0, cols).rowwise() += mean.segment(j0, cols).transpose();
-      if (any_dropped) {
-        for (int k = 0; k < N; ++k)
-          if (drop[k]) d.block(k, j0, 1, cols).setZero();
+      for (int k = 0; (any_dropped || any_weak) && k < N; ++k) {
+        if (drop[k]) d.block(k, j0, 1, cols).setZero();
+        else if (any_weak) d.block(k, j0, 1, cols) *= p.weight[k];
       }
     }
   });
@@ -525,7 +556,7 @@ cv::Mat DetailRegressor::Impl::Assemble(const RowMatrixXf& c, const std::vector<
 
   t0 = Clock::now();
   cv::Mat D = sampler->Splat(d);  // Σ_kept w d / Σ_all w (dropped rows are 0)
-  if (any_dropped) RenormaliseDropped(drop, &D);
+  if (any_dropped || any_weak) RenormaliseDropped(p, &D);
   t->merge_ms = MsSince(t0);
 
   t0 = Clock::now();
@@ -536,25 +567,30 @@ cv::Mat DetailRegressor::Impl::Assemble(const RowMatrixXf& c, const std::vector<
 
 // Where dropped patches had weight, divides the merge by the kept share
 // 1 − Σ_dropped w_k / Σ w, only on the dropped patches' footprints (sequential,
-// fixed order). calloc: only the touched pages of the scratch map are zeroed.
-void DetailRegressor::Impl::RenormaliseDropped(const std::vector<uint8_t>& drop, cv::Mat* D) const {
+// fixed order). Under the soft gate a patch of gate weight g_k counts 1 − g_k
+// dropped, and the kept share is floored at kSoftGateShareFloor. calloc: only the
+// touched pages of the scratch map are zeroed.
+void DetailRegressor::Impl::RenormaliseDropped(const Prepared& p, cv::Mat* D) const {
   const int N = layout.num_patches();
   std::unique_ptr<float, decltype(&std::free)> acc(static_cast<float*>(std::calloc(static_cast<size_t>(R) * R, sizeof(float))),
                                                    &std::free);
   Require(acc != nullptr, "DetailRegressor: out of memory (renormalising the merge)");
+  const bool soft = !p.weight.empty();
   std::vector<int32_t> touched;
   for (int k = 0; k < N; ++k) {
-    if (!drop[k]) continue;
+    const float dropped = p.drop[k] ? 1.0f : soft ? 1.0f - p.weight[k] : 0.0f;
+    if (dropped == 0.0f) continue;
     for (int64_t e = share_begin[k]; e < share_begin[k + 1]; ++e) {
       float& a = acc.get()[share_texel[e]];
       if (a == 0.0f) touched.push_back(share_texel[e]);
-      a += share_value[e];
+      a += dropped * share_value[e];
     }
   }
   float* o = D->ptr<float>(0);
   for (int32_t i : touched) {
     const float kept = 1.0f - acc.get()[i];
-    o[i] = kept > 1e-4f ? o[i] / kept : 0.0f;
+    if (soft) o[i] /= std::max(kept, kSoftGateShareFloor);
+    else o[i] = kept > 1e-4f ? o[i] / kept : 0.0f;
   }
 }
 
@@ -587,7 +623,7 @@ cv::Mat DetailRegressor::Regress(const cv::Mat& gray, const cv::Mat& seen, Detai
   t.regress_ms = MsSince(t0);
 
   // 3–5. Reconstruct, merge, fill.
-  D = m.Assemble(c, p.drop, &t);
+  D = m.Assemble(c, p, &t);
   if (timing) *timing = t;
   return D;
 }
@@ -606,12 +642,12 @@ cv::Mat DetailRegressor::AssembleFromTruth(const cv::Mat& gray, const cv::Mat& s
     if (timing) *timing = t;
     return cv::Mat(R, R, CV_32F, cv::Scalar(0));
   }
-  const std::vector<uint8_t> drop = m.Prepare(gray, seen, &t).drop;
+  const Impl::Prepared p = m.Prepare(gray, seen, &t);
   // 2'. The truth's own patches projected onto the model's basis: c_i = basisᵀ (d_i − mean).
   const auto t0 = Clock::now();
   const RowMatrixXf c = m.model.pca.ProjectPatches(m.sampler->Sample(truth));
   t.regress_ms = MsSince(t0);
-  const cv::Mat D = m.Assemble(c, drop, &t);
+  const cv::Mat D = m.Assemble(c, p, &t);
   if (timing) *timing = t;
   return D;
 }

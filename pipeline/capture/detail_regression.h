@@ -42,7 +42,12 @@
 //     out when this frame's DoG response at its centre is ≤ α — the rule by which
 //     training pairs were selected (ExtractTrainingPatches), so the regressor is only
 //     asked about patches like the ones it was trained on. Without the gate a frame
-//     with no wrinkle still gets whatever the cascade predicts for a flat patch.
+//     with no wrinkle still gets whatever the cascade predicts for a flat patch. The
+//     gate is soft by default (gate_softness s): the patch's weight w ramps from 0 at
+//     a response of (1 − s)α to 1 at (1 + s)α, scales its d_i and counts 1 − w
+//     dropped in the merge (whose kept share is then floored at 1/4, so a texel fades
+//     to 0 with its patches' weights). A hard gate switched patches whose response
+//     sensor noise moved across α on and off from frame to frame.
 //
 // Speed (bench/detail_regression_bench.cc BM_Regress, 2-vCPU Sapphire Rapids shared with
 // three other builds — load average 3.5–4.3 — Release, R = 1024, /work/main/out/model.cdm:
@@ -144,6 +149,16 @@ struct DetailRegressionOptions {
   // Drop patches whose DoG response at the centre is ≤ α in this frame (training's
   // pair-selection rule, Sec. 4.2; not in the paper's capture). Default off (the paper).
   bool gate_by_response = false;
+  // With the gate: its ramp s. A patch's weight rises from 0 at a response of
+  // (1 − s)α to 1 at (1 + s)α and scales its d_i (header, "Optional gate"); 0 = the
+  // hard gate (before crease 0.4.18). Not in the paper. Measured on the holds' novel
+  // actors (seeds 1–3, `gated-level`, 2×2 studio), s = 0 → 0.75: at R3 (the tracker)
+  // the still face 0.927 / 0.860 / 0.892 → 0.957 / 0.923 / 0.941, D^t against the
+  // registered truth's band 0.153 / 0.105 / 0.182 → 0.161 / 0.111 / 0.202, the band
+  // normal error 1.69 → 1.60 × L~^t's, band jitter 4.0 → 2.9 µm (means); at R2 the
+  // band 0.335 → 0.354, still face 0.844 → 0.843, jitter 2.3 → 1.8 µm. s = 1: R2
+  // still face 0.870, but a higher normal error (R2 1.10 ×, R3 1.64 ×).
+  double gate_softness = 0.75;
   PoissonFillOptions fill;  // Sec. 5.2 Poisson fill (poisson_fill.h)
   // Difference 6 (reference_alignment.h; off by default): align the reference to every
   // T^t before flattening (with the model's texture_reference ratio or difference), or
