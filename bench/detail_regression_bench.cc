@@ -198,6 +198,7 @@ void BM_Regress(benchmark::State& state) {
   tbb::global_control threads(tbb::global_control::max_allowed_parallelism, state.range(0));
   DetailRegressionOptions o;
   o.gate_by_response = state.range(1) != 0;
+  o.gate_softness = state.range(1) == 2 ? 0.75 : 0.0;
   const DetailRegressor r = MakeRegressor(o);
   const Setup& s = TheSetup();
   // Mean and minimum per sub-step (the minimum is robust to other jobs on the machine).
@@ -260,8 +261,8 @@ void BM_Regress(benchmark::State& state) {
     }
   }
 }
-// Args: threads, gate_by_response.
-BENCHMARK(BM_Regress)->Args({1, 0})->Args({2, 0})->Args({2, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
+// Args: threads, the response gate (0 off, 1 hard, 2 soft: gate_softness 0.75).
+BENCHMARK(BM_Regress)->Args({1, 0})->Args({2, 0})->Args({2, 1})->Args({2, 2})->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_FixLayout(benchmark::State& state) {
   const Setup& s = TheSetup();
