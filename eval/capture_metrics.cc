@@ -161,6 +161,17 @@ json RegionComparisonsJson(const std::vector<CaptureEvalSummary::RegionCompariso
   return j;
 }
 
+json ExpressionComparisonsJson(const std::vector<CaptureEvalSummary::ExpressionComparison>& expressions) {
+  json j = json::object();
+  for (const auto& e : expressions) {
+    j[e.expression] = {{"frames", e.frames},
+                       {"band", ComparisonJson(e.band)},
+                       {"registered_frames", e.registered_frames},
+                       {"registered_band", ComparisonJson(e.registered_band)}};
+  }
+  return j;
+}
+
 double Amp(const MapComparison& c) { return c.reference_rms_mm > 0 ? c.extracted_rms_mm / c.reference_rms_mm : 0.0; }
 
 void Accumulate(const SurfaceError& s, SurfaceError* sum) {
@@ -937,6 +948,11 @@ struct FrameLoopState {
   // Displacement pooled over the active frames (and those where the wrinkle layer is active).
   MapMoments pooled_face, pooled_wrinkle, pooled_band, pooled_layer_band;
   std::vector<MapMoments> pooled_region, pooled_region_band;  // per CaptureEvalContext::region_masks
+  struct ExpressionPool {
+    MapMoments band, registered_band;
+    int frames = 0, registered_frames = 0;
+  };
+  std::map<std::string, ExpressionPool> by_expression;  // CaptureEvalSummary::d_by_expression
   int active_frames = 0, layer_active_frames = 0;
   MapMoments still_pooled;  // D^t against the previous D^t over every still pair (MeasureStillFace)
   cv::Mat error_vectors;  // Fig. 11's picture, once drawn
@@ -1137,11 +1153,24 @@ void PoolSlidTruth(const CaptureEvalContext& c, const cv::Mat& Gb, FrameLoopStat
   }
 }
 
+// The expression a frame holds, for CaptureEvalSummary::d_by_expression: the name
+// of the largest weight of β if it reaches 0.5, without a side suffix ("_L", "_R");
+// empty for a face near neutral.
+std::string DominantExpression(const FaceRig& rig, const Eigen::VectorXd& beta) {
+  if (beta.size() == 0 || beta.size() != static_cast<Eigen::Index>(rig.expression_names.size())) return {};
+  Eigen::Index k = 0;
+  if (!(beta.maxCoeff(&k) >= 0.5)) return {};
+  std::string name = rig.expression_names[static_cast<size_t>(k)];
+  if (name.size() > 2 && (name.ends_with("_L") || name.ends_with("_R"))) name.resize(name.size() - 2);
+  return name;
+}
+
 // Pools the frame's band (Db) into the displacement metrics of the frames where
 // it is active: against the truth (D, G, Gb) and against the dataset's wrinkle layer
 // (its band Lb, static lines included: the truth of crease ≤ 0.3) when the truth is D*.
 void PoolDisplacement(const CaptureEvalContext& c, const cv::Mat& D, const cv::Mat& G, const cv::Mat& Db,
-                      const cv::Mat& Gb, const cv::Mat& Lb, const FrameCaptureEval& e, FrameLoopState* st) {
+                      const cv::Mat& Gb, const cv::Mat& Lb, const Eigen::VectorXd& beta, const FrameCaptureEval& e,
+                      FrameLoopState* st) {
   if (c.detail_truth) {
     if (CompareMaps(Db, Lb, c.wrinkle_mask).reference_rms_mm >= c.options.active_reference_rms_mm) {
       ++st->layer_active_frames;
@@ -1157,6 +1186,12 @@ void PoolDisplacement(const CaptureEvalContext& c, const cv::Mat& D, const cv::M
     for (size_t k = 0; k < c.region_masks.size(); ++k) {
       st->pooled_region[k].Add(D, G, c.region_masks[k].second);
       st->pooled_region_band[k].Add(Db, Gb, c.region_masks[k].second);
+    }
+    const std::string expression = DominantExpression(c.truth_rig, beta);
+    if (!expression.empty()) {
+      FrameLoopState::ExpressionPool& pool = st->by_expression[expression];
+      ++pool.frames;
+      pool.band.Add(Db, Gb, c.wrinkle_mask);
     }
   }
 }
@@ -1266,6 +1301,12 @@ void PoolRegisteredTruth(const CaptureEvalContext& c, const RigTruth& t, const C
   st->reg_layer_band.Add(Db, reg[2], c.wrinkle_mask);
   st->reg_truth_band.Add(reg[1], Gb, c.wrinkle_mask);
   st->reg_truth_layer_band.Add(reg[2], Lb, c.wrinkle_mask);
+  const std::string expression = DominantExpression(c.truth_rig, t.beta);
+  if (!expression.empty()) {
+    FrameLoopState::ExpressionPool& pool = st->by_expression[expression];
+    ++pool.registered_frames;
+    pool.registered_band.Add(Db, reg[1], c.wrinkle_mask);
+  }
 }
 
 // D^t of one frame, its truth D* (empty unless the detail truth is Sec. 4.1's) and
@@ -1323,7 +1364,7 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
     e->has_band_normals = true;
   }
   MeasureWrinkleOffset(c, Db, Gb, e);
-  PoolDisplacement(c, d.D, G, Db, Gb, Lb, *e, st);
+  PoolDisplacement(c, d.D, G, Db, Gb, Lb, beta, *e, st);
   if (st->registration && IsActiveFrame(c.options, *e)) {
     PoolRegisteredTruth(c, t, arrays, d.D, G, Db, Gb, Lb, st);
   }
@@ -1534,6 +1575,10 @@ CaptureEvalSummary ReduceSummary(const CaptureEvalContext& c, const FrameLoopSta
   s.d_wrinkle_band = st.pooled_band.Result();
   for (size_t k = 0; k < st.pooled_region.size(); ++k)
     s.d_by_region.push_back({c.region_masks[k].first, st.pooled_region[k].Result(), st.pooled_region_band[k].Result()});
+  for (const auto& [name, pool] : st.by_expression) {
+    s.d_by_expression.push_back({name, pool.frames, pool.registered_frames, pool.band.Result(),
+                                 pool.registered_band.Result()});
+  }
   s.d_layer_band = st.pooled_layer_band.Result();
   s.d_still_pooled_correlation = st.still_pooled.Result().correlation;
   if (st.appearance) s.appearance = st.appearance->Result();
@@ -1615,6 +1660,7 @@ std::string CaptureEvalSummary::ToJson() const {
                        {"wrinkle_regions_band", ComparisonJson(d_wrinkle_band)},
                        {"by_region", RegionComparisonsJson(d_by_region, false)},
                        {"by_region_band", RegionComparisonsJson(d_by_region, true)},
+                       {"by_expression", ExpressionComparisonsJson(d_by_expression)},
                        {"truth", detail_truth},
                        {"wrinkle_layer_band", ComparisonJson(d_layer_band)},
                        {"wrinkle_layer_active_frames", layer_active_frames},
@@ -1858,6 +1904,15 @@ std::string CaptureEvalSummary::ToMarkdown() const {
       o << fmt::format("| {} (band: correlation {:.3f}, amplitude {:.2f}) | {:.4f} | {:.3f} | {:.2f} | {:.4f} |\n",
                        r.region, r.band.correlation, Amp(r.band), r.detail.rmse_mm, r.detail.correlation,
                        Amp(r.detail), r.detail.reference_rms_mm);
+    }
+    if (!d_by_expression.empty()) {
+      o << "\nBy the expression held (the truth's largest weight ≥ 0.5), wrinkle regions, wrinkle band:\n\n"
+           "| expression | frames | correlation | amplitude ratio | registered through the image: frames | "
+           "correlation |\n|---|---|---|---|---|---|\n";
+      for (const auto& e : d_by_expression) {
+        o << fmt::format("| {} | {} | {:.3f} | {:.2f} | {} | {:.3f} |\n", e.expression, e.frames, e.band.correlation,
+                         Amp(e.band), e.registered_frames, e.registered_band.correlation);
+      }
     }
     o << fmt::format("\nD^t jitter (frame-to-frame change of the band error, wrinkle regions): {:.4f} mm\n",
                      d_jitter_mm);

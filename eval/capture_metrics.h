@@ -255,6 +255,16 @@ struct CaptureEvalSummary {
     MapComparison detail, band;
   };
   std::vector<RegionComparison> d_by_region;
+  // The wrinkle band split by the truth's expression (DominantExpression: the
+  // largest true weight, at least 0.5, its side suffix dropped; in name order),
+  // active frames: against D* and, with registered_truth, against D* registered
+  // through the image. Which expressions the regression finds and which it misses.
+  struct ExpressionComparison {
+    std::string expression;
+    int frames = 0, registered_frames = 0;
+    MapComparison band, registered_band;
+  };
+  std::vector<ExpressionComparison> d_by_expression;
   // D^t's wrinkle band against the dataset's wrinkle layer alone (the studio's lines,
   // static ones included, without the coarse band: the truth of crease ≤ 0.3),
   // wrinkle regions, frames where that layer is active.

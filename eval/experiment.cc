@@ -520,7 +520,7 @@ namespace {
 constexpr std::pair<const char*, const char*> kStageCodeVersions[] = {
     {"rig", "0.4.7"},      {"scans", "0.4.7"},    {"pairs", "0.4.7"},      {"model", "0.4.7"},
     {"loao", "0.4.7"},     {"tracker", "0.4.7"},  {"actor", "0.4.7"},      {"sequence", "0.4.17"},
-    {"truth-maps", "0.4.7"}, {"capture", "0.4.18"}, {"eval", "0.4.14"}, {"scan-truth", "0.4.16"},
+    {"truth-maps", "0.4.7"}, {"capture", "0.4.18"}, {"eval", "0.4.18"}, {"scan-truth", "0.4.16"},
 };
 
 }  // namespace

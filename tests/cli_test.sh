@@ -183,7 +183,14 @@ act, inact = (json.load(open(p))["displacement"] for p in sys.argv[1:3])
 for name, d in (("truth with wrinkles", act), ("threshold out of reach", inact)):
     print(f"still face, {name}: {d['still_pairs']} pair(s), {d['still_active_pairs']} with wrinkles in the truth, "
           f"{d['still_inactive_pairs']} without; correlation {d.get('still_correlation')}, pooled {d.get('still_pooled_correlation')}")
-sys.exit(0 if act["still_active_pairs"] == 1 and act["still_inactive_pairs"] == 0 and act["still_active_correlation"] > 0.9999
+# The same frames by the expression held (displacement.by_expression): one expression,
+# named without its side, both frames, the truth correlating 1 with itself.
+by = act["by_expression"]
+print("by expression: " + ", ".join(f"{k}: {e['frames']} frames, band {e['band']['correlation']:.4f}" for k, e in by.items()))
+one = list(by.values())[0] if len(by) == 1 else None
+sys.exit(0 if one and not list(by)[0].endswith(("_L", "_R")) and one["frames"] == 2 and one["band"]["correlation"] > 0.9999
+         and inact["by_expression"] == {}
+         and act["still_active_pairs"] == 1 and act["still_inactive_pairs"] == 0 and act["still_active_correlation"] > 0.9999
          and act["still_pooled_correlation"] > 0.9999 and "still_inactive_correlation" not in act
          and inact["still_inactive_pairs"] == 1 and inact["still_active_pairs"] == 0 and inact["still_inactive_correlation"] > 0.9999
          and "still_active_correlation" not in inact else 1)
