@@ -174,6 +174,20 @@ json ExpressionComparisonsJson(const std::vector<CaptureEvalSummary::ExpressionC
 
 double Amp(const MapComparison& c) { return c.reference_rms_mm > 0 ? c.extracted_rms_mm / c.reference_rms_mm : 0.0; }
 
+// eval.md's table of CaptureEvalSummary::d_by_expression (empty without one).
+std::string ExpressionTableMarkdown(const std::vector<CaptureEvalSummary::ExpressionComparison>& expressions) {
+  if (expressions.empty()) return {};
+  std::string o =
+      "\nBy the expression held (the truth's largest weight ≥ 0.5), wrinkle regions, wrinkle band:\n\n"
+      "| expression | frames | correlation | amplitude ratio | registered through the image: frames | "
+      "correlation |\n|---|---|---|---|---|---|\n";
+  for (const auto& e : expressions) {
+    o += fmt::format("| {} | {} | {:.3f} | {:.2f} | {} | {:.3f} |\n", e.expression, e.frames, e.band.correlation,
+                     Amp(e.band), e.registered_frames, e.registered_band.correlation);
+  }
+  return o;
+}
+
 void Accumulate(const SurfaceError& s, SurfaceError* sum) {
   sum->samples += s.samples;
   sum->distance_mm += s.distance_mm;
@@ -1905,15 +1919,7 @@ std::string CaptureEvalSummary::ToMarkdown() const {
                        r.region, r.band.correlation, Amp(r.band), r.detail.rmse_mm, r.detail.correlation,
                        Amp(r.detail), r.detail.reference_rms_mm);
     }
-    if (!d_by_expression.empty()) {
-      o << "\nBy the expression held (the truth's largest weight ≥ 0.5), wrinkle regions, wrinkle band:\n\n"
-           "| expression | frames | correlation | amplitude ratio | registered through the image: frames | "
-           "correlation |\n|---|---|---|---|---|---|\n";
-      for (const auto& e : d_by_expression) {
-        o << fmt::format("| {} | {} | {:.3f} | {:.2f} | {} | {:.3f} |\n", e.expression, e.frames, e.band.correlation,
-                         Amp(e.band), e.registered_frames, e.registered_band.correlation);
-      }
-    }
+    o << ExpressionTableMarkdown(d_by_expression);
     o << fmt::format("\nD^t jitter (frame-to-frame change of the band error, wrinkle regions): {:.4f} mm\n",
                      d_jitter_mm);
     if (still_pairs > 0) {
