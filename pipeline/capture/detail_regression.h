@@ -90,6 +90,8 @@
 //      textures, the neutral one gets D^t in [−0.056, 0.136] mm with the forehead
 //      groove of the brow raise (whose D^t is in [−0.38, 0.18] mm) still visible; the
 //      gate keeps 91 of 200 patches and removes that groove ([−0.058, 0.058] mm).
+//      Its ramp (gate_softness, header "Optional gate") is ours too: the hard
+//      threshold of training's pair selection made patches flicker at capture.
 //   5. Step 4 "average" is the bilinear-weighted average of PatchSampler::Splat
 //      (patches.h, Difference 3).
 //   6. With the model's texture_reference ratio or difference (wrinkle_map.h,
