@@ -1181,9 +1181,10 @@ std::string DominantExpression(const FaceRig& rig, const Eigen::VectorXd& beta) 
 
 // Pools the frame's band (Db) into the displacement metrics of the frames where
 // it is active: against the truth (D, G, Gb) and against the dataset's wrinkle layer
-// (its band Lb, static lines included: the truth of crease ≤ 0.3) when the truth is D*.
+// (its band Lb, static lines included: the truth of crease ≤ 0.3) when the truth is D*;
+// and by `expression`, the frame's DominantExpression (empty: none).
 void PoolDisplacement(const CaptureEvalContext& c, const cv::Mat& D, const cv::Mat& G, const cv::Mat& Db,
-                      const cv::Mat& Gb, const cv::Mat& Lb, const Eigen::VectorXd& beta, const FrameCaptureEval& e,
+                      const cv::Mat& Gb, const cv::Mat& Lb, const std::string& expression, const FrameCaptureEval& e,
                       FrameLoopState* st) {
   if (c.detail_truth) {
     if (CompareMaps(Db, Lb, c.wrinkle_mask).reference_rms_mm >= c.options.active_reference_rms_mm) {
@@ -1201,7 +1202,6 @@ void PoolDisplacement(const CaptureEvalContext& c, const cv::Mat& D, const cv::M
       st->pooled_region[k].Add(D, G, c.region_masks[k].second);
       st->pooled_region_band[k].Add(Db, Gb, c.region_masks[k].second);
     }
-    const std::string expression = DominantExpression(c.truth_rig, beta);
     if (!expression.empty()) {
       FrameLoopState::ExpressionPool& pool = st->by_expression[expression];
       ++pool.frames;
@@ -1301,10 +1301,10 @@ void AddDrift(const CaptureEvalContext& c, const cv::Mat& u, const cv::Mat& v, F
 
 // An active frame's D^t against the truth registered through the image at L~^t
 // (eval/registered_truth.h): D* raw and banded, and the wrinkle layer's band; and
-// the registered truth against the truth itself.
+// the registered truth against the truth itself; and by `expression` as PoolDisplacement.
 void PoolRegisteredTruth(const CaptureEvalContext& c, const RigTruth& t, const CaptureFrameArrays& arrays,
                          const cv::Mat& D, const cv::Mat& G, const cv::Mat& Db, const cv::Mat& Gb, const cv::Mat& Lb,
-                         FrameLoopState* st) {
+                         const std::string& expression, FrameLoopState* st) {
   const std::vector<cv::Mat> reg =
       st->registration->Register(t.true_cam, arrays.refined, {G, Gb, Lb, st->chart_u, st->chart_v});
   ++st->reg_frames;
@@ -1315,7 +1315,6 @@ void PoolRegisteredTruth(const CaptureEvalContext& c, const RigTruth& t, const C
   st->reg_layer_band.Add(Db, reg[2], c.wrinkle_mask);
   st->reg_truth_band.Add(reg[1], Gb, c.wrinkle_mask);
   st->reg_truth_layer_band.Add(reg[2], Lb, c.wrinkle_mask);
-  const std::string expression = DominantExpression(c.truth_rig, t.beta);
   if (!expression.empty()) {
     FrameLoopState::ExpressionPool& pool = st->by_expression[expression];
     ++pool.registered_frames;
@@ -1378,9 +1377,10 @@ FrameDisplacement EvaluateFrameDisplacement(const CaptureEvalContext& c, int ind
     e->has_band_normals = true;
   }
   MeasureWrinkleOffset(c, Db, Gb, e);
-  PoolDisplacement(c, d.D, G, Db, Gb, Lb, beta, *e, st);
+  const std::string expression = DominantExpression(c.truth_rig, beta);  // for d_by_expression
+  PoolDisplacement(c, d.D, G, Db, Gb, Lb, expression, *e, st);
   if (st->registration && IsActiveFrame(c.options, *e)) {
-    PoolRegisteredTruth(c, t, arrays, d.D, G, Db, Gb, Lb, st);
+    PoolRegisteredTruth(c, t, arrays, d.D, G, Db, Gb, Lb, expression, st);
   }
   MeasureDisplacementJitter(c, st->previous, index, d.band_err, e);
   MeasureStillFace(c, st->previous, index, d.D, beta, e, &st->still_pooled);
