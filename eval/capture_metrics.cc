@@ -767,7 +767,11 @@ CaptureEvalContext::CaptureEvalContext(const fs::path& capture_dir, const fs::pa
   SetUpFaceChart();
   SetUpTruthMotion();
   SetUpSurfaceTruth();
-  if (!options.truth_maps_dir.empty()) fs::create_directories(options.truth_maps_dir);
+  if (!options.truth_maps_dir.empty()) {
+    fs::create_directories(options.truth_maps_dir);
+    // The texels the wrinkle metrics score (255), to look at beside the maps.
+    WriteImage(fs::path(options.truth_maps_dir) / "wrinkle_mask.png", wrinkle_mask);
+  }
   ReadMesoscopic();
   SelectFrames();
   SetUpDetailTruth();

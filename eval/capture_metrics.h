@@ -91,7 +91,8 @@ struct CaptureEvalOptions {
   // When set, the truth D^t is scored against is written here per frame
   // (NNNNNN.exr, mm, CV_32F, the capture's map resolution), to look at beside D^t,
   // with the D^HF of the true albedo (mesoscopic_albedo.exr, AlbedoMesoscopicMap)
-  // when the dataset has one.
+  // when the dataset has one, and the wrinkle regions' mask (wrinkle_mask.png, 255
+  // where the wrinkle metrics score a texel).
   std::string truth_maps_dir;
   // The regions of the wrinkle metrics (rig region masks).
   std::vector<std::string> wrinkle_regions = {"forehead", "glabella", "left_eye", "right_eye", "left_cheek",

@@ -79,7 +79,7 @@ class DetailTruth {
   // actors, wrinkle band, mean): D* agrees with it at 0.88 / 0.83 / 0.48 / 0.62 on
   // brow raise / frown / smile / sneer, Sec. 4.1's D^j at 0.83 / 0.71 / 0.62 / 0.60;
   // on smiles the exact detail is dominated by the coarse facets' rounding, which D*
-  // leaves out (README, "Which of the two is right"). With `phong_alpha` > 0 (both
+  // leaves out (docs/detail-path.md, "Which of the two is right"). With `phong_alpha` > 0 (both
   // distances alike): what L~^t lacks if H^t's base were rounded as the studio's.
   cv::Mat ExactDetail(const Eigen::VectorXd& expression, const TriMesh& surface, const cv::Mat& neutral_distance,
                       double phong_alpha = 0.0, double max_mm = 2.0) const;

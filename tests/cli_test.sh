@@ -123,6 +123,7 @@ ok "eval truth maps" "$crease" eval --capture "$tmp/cap_fit" --dataset "$tmp/seq
 mkdir -p "$tmp/cap_oracle/displacement" && cp -r "$tmp/cap_fit/capture.json" "$tmp/cap_fit/rig.crig" "$tmp/cap_fit/frames" "$tmp/cap_fit/maps" "$tmp/cap_oracle/" \
   && cp "$tmp/truth_maps/"[0-9]*.exr "$tmp/cap_oracle/displacement/" \
   && cp "$tmp/truth_maps/mesoscopic_albedo.exr" "$tmp/cap_oracle/maps/mesoscopic.exr"
+[ -s "$tmp/truth_maps/wrinkle_mask.png" ] || { echo "FAIL: eval wrote no wrinkle_mask.png beside the truth maps"; fails=$((fails+1)); }
 ok "eval perfect regressor" "$crease" eval --capture "$tmp/cap_oracle" --dataset "$tmp/seq" --set surface_every=1 --set surface_mesh_resolution=64 --set active_reference_rms_mm=0
 python3 - "$tmp/cap_oracle/eval.json" <<'PY' || { echo "FAIL: the perfect regressor's normal errors"; fails=$((fails+1)); }
 import json, sys

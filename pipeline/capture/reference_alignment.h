@@ -41,7 +41,7 @@
 // gives 103–127 ms per call on its synthetic maps, far above the capture's figure,
 // for a reason not found (its samples fall mostly in OpenCV's worker threads). An
 // option for research, off by default: on the paper profile it did not raise D^t's
-// correlation (README, "The reference alignment").
+// correlation (docs/detail-path.md, "The reference alignment").
 #pragma once
 
 #include <opencv2/core/mat.hpp>
