@@ -1359,6 +1359,19 @@ std::vector<ExperimentSummary> RunExperiments(const std::vector<ExperimentJob>& 
   return summaries;
 }
 
+std::optional<std::string> ResultsProfile(const fs::path& out) {
+  const fs::path file = out / "experiment.json";
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) return std::nullopt;
+  try {
+    const json j = ReadJsonFile(file);
+    if (!j.is_object() || !j.contains("profile") || !j["profile"].is_string()) return std::nullopt;
+    return j["profile"].get<std::string>();
+  } catch (const std::exception&) {
+    return std::nullopt;  // unreadable: nothing to warn about
+  }
+}
+
 ExperimentSummary RunExperiment(const ExperimentConfig& config, const ExperimentRunnerOptions& options,
                                 const StageExecutor& executor) {
   return RunExperiments({ExperimentJob{config, options}}, executor).front();

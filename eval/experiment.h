@@ -44,6 +44,7 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -263,6 +264,12 @@ struct ExperimentSummary {
   int stages = 0, stages_cached = 0, stages_run = 0, stages_failed = 0;
   double seconds = 0.0;
 };
+
+// The profile of the results already in the folder `out` (its experiment.json; "" for
+// a run without --profile); nullopt when it holds none or they cannot be read. A run
+// of the experiment with another profile replaces them (results.csv, experiment.json
+// and run files of the same id), so the program warns before it does.
+std::optional<std::string> ResultsProfile(const std::filesystem::path& out);
 
 // Plans, runs (cached) and collects an experiment: out/runs/<id>.json per run,
 // out/results.csv and out/experiment.json (what reports/make_report.py reads).

@@ -177,6 +177,22 @@ TEST(Experiment, ConfigsListInTheOrderFileThenByName) {
   EXPECT_ERROR_HAS(ListExperimentConfigs(dir / "none"), "no experiments folder");
 }
 
+// A results folder's profile, so that a run with another profile warns before it
+// replaces those results: missing, unreadable or profile-less files give none.
+TEST(Experiment, ResultsProfileReadsTheFoldersExperimentJson) {
+  const fs::path dir = testing::TestDir() / "results_profile";
+  fs::create_directories(dir);
+  EXPECT_FALSE(ResultsProfile(dir).has_value());
+  testing::WriteText(dir / "experiment.json", R"({"name": "x", "profile": "holds-r2"})");
+  EXPECT_EQ(ResultsProfile(dir), std::optional<std::string>("holds-r2"));
+  testing::WriteText(dir / "experiment.json", R"({"name": "x", "profile": ""})");
+  EXPECT_EQ(ResultsProfile(dir), std::optional<std::string>(""));
+  testing::WriteText(dir / "experiment.json", R"({"name": "x"})");
+  EXPECT_FALSE(ResultsProfile(dir).has_value());
+  testing::WriteText(dir / "experiment.json", "{not json");
+  EXPECT_FALSE(ResultsProfile(dir).has_value());
+}
+
 TEST(Experiment, GridSweepIsTheCartesianProduct) {
   std::string yaml = kConfig;
   yaml.replace(yaml.find("mode: list"), 10, "mode: grid");

@@ -154,6 +154,12 @@ void RunExperimentCommand(const RunArgs& a) {
   for (const auto& c : parsed) {
     ExperimentRunnerOptions oc = o;
     oc.out = root / c.name;
+    const std::optional<std::string> previous = ResultsProfile(oc.out);
+    if (previous && *previous != a.profile) {
+      std::fprintf(stderr, "%s: %s holds the results of profile '%s'; this run's (profile '%s') replace them "
+                   "(the stages stay cached; -o DIR keeps profiles apart)\n",
+                   c.name.c_str(), oc.out.string().c_str(), previous->c_str(), a.profile.c_str());
+    }
     oc.record_stages = a.executor == "slurm";
     oc.command = fmt::format("crease experiment run {}{}{}{}{}", a.name == "all" ? "all" : c.name,
                              a.profile.empty() ? "" : " --profile " + a.profile,
