@@ -4,6 +4,7 @@
 #include <cmath>
 #include <map>
 #include <limits>
+#include <optional>
 #include <set>
 #include <fmt/format.h>
 #include <fmt/ranges.h>
@@ -295,14 +296,48 @@ json ParseJsonOnceEach(const std::string& text, const std::string& what) {
 // use. A few lines of nested aliases ("a: &a [x,x,...]", "b: &b [*a,*a,...]", ...)
 // expand to 9^9 nodes and gigabytes; crease's largest configs have a few hundred.
 constexpr size_t kMaxYamlNodes = 100'000;
+// The deepest a YAML document may nest. yaml-cpp loads an alias inside its own anchor
+// ("a: &a [1, *a]") as a cycle, which no node count stops before the stack overflows.
+constexpr int kMaxYamlDepth = 64;
+
+template <class Json>
+Json YamlToJson(const YAML::Node& node, const std::string& what, size_t* count, int depth);
+
+// YAML 1.1's merge key, which yaml-cpp leaves to its users: "<<: *base" (or a list of
+// aliases) adds each key of the named mapping(s) that `o` does not set itself, the
+// first mapping in the list winning. Configs use it to share settings between
+// variants (experiments/detail-levers.yaml). `at` is the "<<" key, for the message.
+template <class Json>
+void MergeYamlKeys(Json* o, const YAML::Node& merge, const YAML::Node& at, const std::string& what,
+                   size_t* count, int depth) {
+  const auto fail = [&] {
+    throw Error(fmt::format("{}:{}:{}: '<<' must name a mapping or a list of mappings", what,
+                            at.Mark().line + 1, at.Mark().column + 1));
+  };
+  std::vector<YAML::Node> maps;
+  if (merge.IsMap()) maps.push_back(merge);
+  else if (merge.IsSequence()) for (const auto& m : merge) maps.push_back(m);
+  else fail();
+  for (const auto& m : maps) {
+    if (!m.IsMap()) fail();
+    const Json base = YamlToJson<Json>(m, what, count, depth);
+    for (auto it = base.begin(); it != base.end(); ++it) {
+      if (!o->contains(it.key())) (*o)[it.key()] = it.value();
+    }
+  }
+}
 
 // YAML scalars carry no type; convert them the way a person reads them. `count`
-// counts the nodes expanded so far (see kMaxYamlNodes).
+// counts the nodes expanded so far (see kMaxYamlNodes), `depth` the node's nesting.
 template <class Json>
-Json YamlToJson(const YAML::Node& node, const std::string& what, size_t* count) {
+Json YamlToJson(const YAML::Node& node, const std::string& what, size_t* count, int depth) {
   if (++*count > kMaxYamlNodes) {
     throw Error(fmt::format("{}: the YAML expands to more than {} nodes (nested aliases?)", what,
                             kMaxYamlNodes));
+  }
+  if (depth > kMaxYamlDepth) {
+    throw Error(fmt::format("{}: the YAML nests deeper than {} levels (an alias inside its own anchor?)", what,
+                            kMaxYamlDepth));
   }
   switch (node.Type()) {
     case YAML::NodeType::Null:
@@ -328,11 +363,14 @@ Json YamlToJson(const YAML::Node& node, const std::string& what, size_t* count) 
     }
     case YAML::NodeType::Sequence: {
       Json a = Json::array();
-      for (const auto& e : node) a.push_back(YamlToJson<Json>(e, what, count));
+      for (const auto& e : node) a.push_back(YamlToJson<Json>(e, what, count, depth + 1));
       return a;
     }
     case YAML::NodeType::Map: {
       Json o = Json::object();
+      // "<<" and what it names, merged after the map's own keys. std::optional: a
+      // yaml-cpp Node's operator= writes through to the node it refers to.
+      std::optional<std::pair<YAML::Node, YAML::Node>> merge;
       for (const auto& kv : node) {
         // A list or mapping as a key ("[a]: 1") was yaml-cpp's bad conversion, an
         // internal error (issue 19).
@@ -341,12 +379,18 @@ Json YamlToJson(const YAML::Node& node, const std::string& what, size_t* count) 
                                   kv.first.Mark().line + 1, kv.first.Mark().column + 1));
         }
         const std::string key = kv.first.as<std::string>();
-        if (o.contains(key)) {
+        const bool is_merge = key == "<<" && kv.first.Tag() != "!";  // a quoted "<<" is a plain key
+        if (is_merge && !merge) {
+          merge.emplace(kv.first, kv.second);
+          continue;
+        }
+        if (o.contains(key) || is_merge) {
           throw Error(fmt::format("{}:{}:{}: key '{}' is set twice", what, kv.first.Mark().line + 1,
                                   kv.first.Mark().column + 1, key));
         }
-        o[key] = YamlToJson<Json>(kv.second, what, count);
+        o[key] = YamlToJson<Json>(kv.second, what, count, depth + 1);
       }
+      if (merge) MergeYamlKeys(&o, merge->second, merge->first, what, count, depth + 1);
       return o;
     }
   }
@@ -362,7 +406,7 @@ Json LoadYaml(const std::string& yaml_text, const std::string& what) {
     throw Error(fmt::format("{}: malformed YAML: {}", what, e.what()));
   }
   size_t count = 0;
-  Json j = YamlToJson<Json>(node, what, &count);
+  Json j = YamlToJson<Json>(node, what, &count, 0);
   // Bytes that are not UTF-8 became JSON strings that nlohmann refuses to write:
   // type_error 316, an internal error (issue 19). They come from the text, or from
   // yaml-cpp itself on valid UTF-8 holding a NUL byte (fuzz/regressions/

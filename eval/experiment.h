@@ -34,7 +34,9 @@
 //       of `variants`, its values then the variants' labels.
 //   variants: {GROUP: {LABEL: {section.field: v, …}, …}, …}
 //       named bundles of settings swept as one value (the detail ladder's rungs:
-//       `rung: [R1, R2, R3]`; image sizes that set the studio and the scans).
+//       `rung: [R1, R2, R3]`; image sizes that set the studio and the scans). A
+//       label may start from another's settings with a YAML merge key, `{<<: *base,
+//       …}` after `base: &base {…}` (core/options.cc; its own keys win).
 //   profiles: {quick: {set: {section.field: v}, sweep: {section.field: [...]}, seeds: N}, paper: {...}}
 //   table, figures, claims: passed to the report (reports/make_report.py) as they are.
 #pragma once

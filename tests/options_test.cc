@@ -5,6 +5,7 @@
 
 #include <fmt/format.h>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include "tests/test_util.h"
 
@@ -102,6 +103,37 @@ TEST(Options, YamlAliasBombIsRefused) {
   }
   const std::string e = ErrorOf([&] { YamlToJsonText(yaml, "bomb.yaml"); });
   EXPECT_NE(e.find("bomb.yaml: the YAML expands to more than"), std::string::npos) << e;
+  // yaml-cpp loads an alias inside its own anchor as a cycle; converting it overflowed
+  // the stack (a segmentation fault in `crease experiment run`) before the depth limit.
+  for (const char* cycle : {"a: &a [1, *a]\n", "a: &a {x: 1, <<: *a}\n"}) {
+    const std::string c = ErrorOf([&] { YamlToJsonText(cycle, "cycle.yaml"); });
+    EXPECT_NE(c.find("cycle.yaml: the YAML nests deeper than 64 levels"), std::string::npos) << c;
+  }
+}
+
+// YAML 1.1 merge keys (yaml-cpp leaves them to its users): "<<" adds the keys of the
+// aliased mapping(s) that the map does not set itself, the first in a list winning;
+// a quoted "<<" is an ordinary key, and anything but mappings is refused.
+TEST(Options, YamlMergeKeysShareSettings) {
+  const std::string yaml =
+      "base: &b {x: 1, y: 2}\n"
+      "other: &o {y: 5, z: 6}\n"
+      "one: {<<: *b, y: 3}\n"
+      "two:\n  <<: [*b, *o]\n  w: 0\n"
+      "quoted: {\"<<\": 7}\n";
+  const auto j = nlohmann::json::parse(YamlToJsonText(yaml, "m.yaml"));
+  EXPECT_EQ(j["one"], nlohmann::json::parse(R"({"x": 1, "y": 3})"));
+  EXPECT_EQ(j["two"], nlohmann::json::parse(R"({"w": 0, "x": 1, "y": 2, "z": 6})"));
+  EXPECT_EQ(j["quoted"], nlohmann::json::parse(R"({"<<": 7})"));
+  EXPECT_NE(ErrorOf([&] { YamlToJsonText("a: {<<: 3}\n", "s.yaml"); })
+                .find("s.yaml:1:5: '<<' must name a mapping or a list of mappings"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { YamlToJsonText("b: &b {x: 1}\na: {<<: [*b, 2]}\n", "l.yaml"); })
+                .find("l.yaml:2:5: '<<' must name a mapping"),
+            std::string::npos);
+  EXPECT_NE(ErrorOf([&] { YamlToJsonText("b: &b {x: 1}\na:\n  <<: *b\n  <<: *b\n", "t.yaml"); })
+                .find("key '<<' is set twice"),
+            std::string::npos);
 }
 
 // Issue 19 (fuzz/options_yaml_fuzzer, fuzz/experiment_yaml_fuzzer): a list or mapping
