@@ -79,6 +79,13 @@ struct TrainingOptions {
   // (crease 0.4.12, seed 1 of detail-levers' gated-level, 3 texels × 2 steps: 7,355
   // pairs instead of 2,061; held expressions at R2): D^t vs D* 0.366 against 0.378 on
   // the novel actor, 0.247 against 0.253 on a training actor. No gain; off.
+  // Nor at R3, where the texture drifts 1-3 mm on the skin and moves lines off the
+  // centres of the patches laid for them (crease 0.4.18, detail-levers profiles
+  // holds-shift and workout-shift, 4 texels × 2 steps = ±1 and ±2 mm, about 3 × the
+  // pairs; 3 seeds, D^t against the registered truth's band): default refinement
+  // 0.134 → 0.136 (holds) and 0.133 → 0.136 (talking workout), dense anchored
+  // refinement 0.266 → 0.267 and 0.212 → 0.199; the still face falls 0.01-0.03 and
+  // the band normal error rises in every case.
   double pair_shift_texels = 2.0;
   int pair_shift_steps = 0;
   // The regression targets in the wrinkle band (not in the paper; issue 17): every
