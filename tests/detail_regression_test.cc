@@ -384,6 +384,46 @@ TEST(DetailRegression, TheSoftGateTurnsPatchesOnGradually) {
   EXPECT_GT(Correlation(soft.Regress(t, cv::Mat()), truth, Chart()), 0.5);
 }
 
+// Difference 7 (recentre_radius): the lines move across themselves by 4 texels after
+// the wrinkle frames laid the patches on them (the tracker's drift). With the gate the
+// fixed patches lose them: their centres' DoG response falls. Patches that move to
+// their line's response in each frame keep the grooves where the frame shows them, in
+// the truth's own patches (AssembleFromTruth) and in the regression, the same bytes
+// for any thread count; on a frame whose lines did not move they cost nothing.
+TEST(DetailRegression, RecentredPatchesFollowLinesThatMoved) {
+  DetailRegressionOptions o = SmallOptions();
+  o.gate_by_response = true;
+  const DetailRegressor fixed = FixedRegressor(o);
+  o.recentre_radius = 6.0;
+  const DetailRegressor moving = FixedRegressor(o);
+  cv::Mat t, truth;
+  Frame(0.2, &t, &truth, /*shift=*/4.0);
+  const double oracle_fixed = Correlation(fixed.AssembleFromTruth(t, cv::Mat(), truth), truth, Chart());
+  const double oracle_moving = Correlation(moving.AssembleFromTruth(t, cv::Mat(), truth), truth, Chart());
+  const double fixed_corr = Correlation(fixed.Regress(t, cv::Mat()), truth, Chart());
+  cv::Mat one, two;
+  {
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, 1);
+    one = moving.Regress(t, cv::Mat());
+  }
+  {
+    tbb::global_control c(tbb::global_control::max_allowed_parallelism, 2);
+    two = moving.Regress(t, cv::Mat());
+  }
+  const double moving_corr = Correlation(two, truth, Chart());
+  std::printf("lines moved 4 texels: oracle %.3f fixed / %.3f re-centred; regression %.3f / %.3f\n", oracle_fixed,
+              oracle_moving, fixed_corr, moving_corr);
+  EXPECT_GT(oracle_moving, oracle_fixed + 0.1);
+  EXPECT_GT(moving_corr, fixed_corr + 0.1);
+  EXPECT_GT(moving_corr, 0.5);
+  EXPECT_EQ(std::memcmp(one.data, two.data, one.total() * sizeof(float)), 0);
+  Frame(0.2, &t, &truth);
+  const double still_fixed = Correlation(fixed.Regress(t, cv::Mat()), truth, Chart());
+  const double still_moving = Correlation(moving.Regress(t, cv::Mat()), truth, Chart());
+  std::printf("lines in place: regression %.3f fixed / %.3f re-centred\n", still_fixed, still_moving);
+  EXPECT_GT(still_moving, still_fixed - 0.05);
+}
+
 // A static dark stripe (a brow painted in the albedo) in every frame, beside the
 // lines that come and go: read raw, the wrinkle map puts patches on it; flattened by
 // the most neutral wrinkle frame (texture_reference = difference, Difference 6) it

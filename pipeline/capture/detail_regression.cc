@@ -29,6 +29,8 @@ void DetailRegressionOptions::VisitFields(OptionVisitor& v) {
   v.Field("patch_max_unseen_fraction", patch_max_unseen_fraction);
   v.Field("gate_by_response", gate_by_response);
   v.Field("gate_softness", gate_softness);
+  v.Field("recentre_radius", recentre_radius);
+  v.Field("recentre_step", recentre_step);
   v.Section("fill", fill);
   v.Section("reference_alignment", reference_alignment);
 }
@@ -45,6 +47,10 @@ void DetailRegressionOptions::Check() const {
   CheckLe(o, "patch_max_unseen_fraction", patch_max_unseen_fraction, 1.0);
   CheckGe(o, "gate_softness", gate_softness, 0.0);
   CheckLe(o, "gate_softness", gate_softness, 1.0);
+  CheckGe(o, "recentre_radius", recentre_radius, 0.0);
+  CheckLe(o, "recentre_radius", recentre_radius, 64.0);
+  CheckGt(o, "recentre_step", recentre_step, 0.0);
+  CheckLe(o, "recentre_step", recentre_step, 64.0);
   fill.Check();
   reference_alignment.Check();
 }
@@ -107,6 +113,8 @@ struct DetailRegressor::Impl {
   std::vector<int32_t> share_texel;
   std::vector<float> share_value;
   std::vector<float> taps_small, taps_large;  // DoG gate kernels (1D)
+  // Re-centring (Difference 7): the candidate offsets along e1, texels of the map; empty = off.
+  std::vector<float> recentre_offsets;
   // Difference 6 (model.wrinkle.texture_reference ratio or difference): the wrinkle frames are
   // held until FixLayout, whose per-texel median of them is the reference every
   // texture is flattened by (FlattenByReference) before the map and the patches.
@@ -151,7 +159,12 @@ struct DetailRegressor::Impl {
     Frame input;
     std::vector<uint8_t> drop;
     std::vector<float> weight;  // the soft gate's w_k (gate_softness > 0; else empty: all 1)
+    std::vector<PatchFrame> frames;  // this frame's re-centred patches (Difference 7; else empty: the layout)
   };
+  // Step 1: the patches of `map`, one per row, on the layout or on p.frames.
+  RowMatrixXf SampleRows(const cv::Mat& map, const Prepared& p) const;
+  // Step 4 with re-centred patches (Difference 7): the merge of the rows of `d`.
+  cv::Mat MergeMoved(const Eigen::MatrixXf& d, const Prepared& p) const;
   Prepared Prepare(const cv::Mat& gray, const cv::Mat& seen, DetailTiming* t) const;
   cv::Mat Assemble(const RowMatrixXf& c, const Prepared& p, DetailTiming* t) const;
   void RenormaliseDropped(const Prepared& p, cv::Mat* D) const;
@@ -220,13 +233,14 @@ struct DetailRegressor::Impl {
   }
 
   // Which patches drop out of this frame (header "Unseen texels"): p->drop 1 =
-  // dropped; with gate_softness > 0 also the gate's weights p->weight.
+  // dropped; with gate_softness > 0 also the gate's weights p->weight, with re-centring
+  // (Difference 7) this frame's moved patches p->frames.
   void Drops(const cv::Mat& src, const cv::Mat& seen, Prepared* p) const {
     const Impl& m = *this;
     const int N = layout.num_patches();
     std::vector<uint8_t>& drop = p->drop;
     drop.assign(N, 0);
-    cv::Mat mask;  // coverage ∧ seen (CV_8U), for the gate
+    cv::Mat mask;  // coverage ∧ seen (CV_8U), for the gate and the re-centring
     if (!seen.empty()) {
       const cv::Mat s = seen.isContinuous() ? seen : seen.clone();
       const uint8_t* sp = s.ptr<uint8_t>(0);
@@ -241,7 +255,9 @@ struct DetailRegressor::Impl {
         drop[k] = unseen > allowed;
       }
     }
-    if (m.options.gate_by_response) {
+    const bool recentres = !m.recentre_offsets.empty();
+    if (recentres) p->frames = m.layout.patches;
+    if (m.options.gate_by_response || recentres) {
       if (seen.empty()) {
         mask = m.coverage;
       } else {
@@ -251,14 +267,12 @@ struct DetailRegressor::Impl {
       }
       const float alpha = static_cast<float>(m.model.wrinkle.wrinkle_threshold);
       const float s = static_cast<float>(m.options.gate_softness);
-      if (s > 0.0f) p->weight.assign(N, 1.0f);
+      if (s > 0.0f && m.options.gate_by_response) p->weight.assign(N, 1.0f);
       tbb::parallel_for(tbb::blocked_range<int>(0, N, 16), [&](const tbb::blocked_range<int>& r) {
         for (int k = r.begin(); k != r.end(); ++k) {
           if (drop[k]) continue;
-          const PatchFrame& f = m.layout.patches[k];
-          const int x = std::clamp(static_cast<int>(std::lround(f.center_texel.x())), 0, R - 1);
-          const int y = std::clamp(static_cast<int>(std::lround(f.center_texel.y())), 0, R - 1);
-          const float response = m.CentreResponse(src, mask, x, y);
+          const float response = recentres ? m.Recentre(src, mask, &p->frames[k]) : m.LayoutResponse(src, mask, k);
+          if (!m.options.gate_by_response) continue;
           if (s > 0.0f) {
             p->weight[k] = GateWeight(response, alpha, s);
             drop[k] = !(p->weight[k] > 0.0f);
@@ -268,6 +282,40 @@ struct DetailRegressor::Impl {
         }
       });
     }
+  }
+
+  // The DoG response at patch k's centre in the layout (its nearest texel).
+  float LayoutResponse(const cv::Mat& gray, const cv::Mat& mask, int k) const {
+    const PatchFrame& f = layout.patches[k];
+    const int x = std::clamp(static_cast<int>(std::lround(f.center_texel.x())), 0, R - 1);
+    const int y = std::clamp(static_cast<int>(std::lround(f.center_texel.y())), 0, R - 1);
+    return CentreResponse(gray, mask, x, y);
+  }
+
+  // Difference 7: moves `f` along e1 to the candidate centre of largest DoG response
+  // (each candidate at its nearest texel), refined by the parabola through it and its
+  // two neighbours when it is not the last either side; returns that largest response.
+  float Recentre(const cv::Mat& gray, const cv::Mat& mask, PatchFrame* f) const {
+    const Eigen::Vector2f e1(std::cos(f->angle), std::sin(f->angle));
+    const int n = static_cast<int>(recentre_offsets.size());
+    std::vector<float> r(n);
+    int best = 0;
+    for (int j = 0; j < n; ++j) {
+      const Eigen::Vector2f c = f->center_texel + recentre_offsets[j] * e1;
+      const int x = std::clamp(static_cast<int>(std::lround(c.x())), 0, R - 1);
+      const int y = std::clamp(static_cast<int>(std::lround(c.y())), 0, R - 1);
+      r[j] = CentreResponse(gray, mask, x, y);
+      if (r[j] > r[best]) best = j;
+    }
+    float offset = recentre_offsets[best];
+    if (best > 0 && best + 1 < n) {
+      const float curvature = r[best - 1] - 2.0f * r[best] + r[best + 1];
+      const float step = recentre_offsets[1] - recentre_offsets[0];
+      if (curvature < 0.0f) offset += std::clamp(0.5f * (r[best - 1] - r[best + 1]) / curvature, -0.5f, 0.5f) * step;
+    }
+    const Eigen::Vector2f c = f->center_texel + offset * e1;
+    f->center_texel = c.cwiseMax(0.0f).cwiseMin(static_cast<float>(R - 1));
+    return r[best];
   }
 
   // The optional gate: the DoG response r = G_large * T − G_small * T at texel
@@ -330,6 +378,9 @@ DetailRegressor::DetailRegressor(const DetailModel& model, const std::vector<Reg
   const double scale = SigmaScale(model.wrinkle, m.R);
   m.taps_small = GaussianTaps(model.wrinkle.dog_small_sigma * scale);
   m.taps_large = GaussianTaps(model.wrinkle.dog_large_sigma * scale);
+  const int steps = static_cast<int>(std::floor(options.recentre_radius / options.recentre_step + 1e-9));
+  for (int j = -steps; steps > 0 && j <= steps; ++j)
+    m.recentre_offsets.push_back(static_cast<float>(j * options.recentre_step * scale));
 }
 
 DetailRegressor::~DetailRegressor() = default;
@@ -516,7 +567,7 @@ DetailRegressor::Impl::Prepared DetailRegressor::Impl::Prepare(const cv::Mat& gr
                                                                DetailTiming* t) const {
   auto t0 = Clock::now();
   ReferenceAlignmentReport alignment;
-  Prepared p{Input(gray, seen, &alignment), {}, {}};
+  Prepared p{Input(gray, seen, &alignment), {}, {}, {}};
   if (t && (warps_texture() || warps_reference())) t->reference_shift = alignment.mean_shift;
   if (t) t->align_ms = MsSince(t0);
   t0 = Clock::now();
@@ -555,8 +606,13 @@ cv::Mat DetailRegressor::Impl::Assemble(const RowMatrixXf& c, const Prepared& p,
   t->reconstruct_ms = MsSince(t0);
 
   t0 = Clock::now();
-  cv::Mat D = sampler->Splat(d);  // Σ_kept w d / Σ_all w (dropped rows are 0)
-  if (any_dropped || any_weak) RenormaliseDropped(p, &D);
+  cv::Mat D;
+  if (!p.frames.empty()) {
+    D = MergeMoved(d, p);
+  } else {
+    D = sampler->Splat(d);  // Σ_kept w d / Σ_all w (dropped rows are 0)
+    if (any_dropped || any_weak) RenormaliseDropped(p, &D);
+  }
   t->merge_ms = MsSince(t0);
 
   t0 = Clock::now();
@@ -594,6 +650,43 @@ void DetailRegressor::Impl::RenormaliseDropped(const Prepared& p, cv::Mat* D) co
   }
 }
 
+RowMatrixXf DetailRegressor::Impl::SampleRows(const cv::Mat& map, const Prepared& p) const {
+  RowMatrixXf rows;
+  if (p.frames.empty()) {
+    Eigen::MatrixXf sampled;  // N × n, column-major (PatchSampler's layout)
+    sampler->Sample(map, &sampled);
+    rows = sampled;
+  } else {
+    rows.resize(layout.num_patches(), layout.samples_per_patch());
+    SamplePatches(map, p.frames, layout.patch_size, rows.data());
+  }
+  return rows;
+}
+
+// The average of step 4 on this frame's moved patches: the rows of `d` (already scaled
+// by the gate's weights g_k, dropped rows 0) splatted, divided by Σ g_k w_k(t) — under
+// the soft gate by at least kSoftGateShareFloor · Σ w_k(t), as RenormaliseDropped does.
+cv::Mat DetailRegressor::Impl::MergeMoved(const Eigen::MatrixXf& d, const Prepared& p) const {
+  const int N = layout.num_patches();
+  std::vector<float> gain(N);
+  for (int k = 0; k < N; ++k) gain[k] = p.drop[k] ? 0.0f : p.weight.empty() ? 1.0f : p.weight[k];
+  const RowMatrixXf rows = d;
+  const SplatSums sums = SplatPatches(p.frames, layout.patch_size, R, rows.data(), gain);
+  cv::Mat D(R, R, CV_32F, cv::Scalar(0));
+  const bool soft = !p.weight.empty();
+  for (int y = 0; y < R; ++y) {
+    const float *v = sums.value.ptr<float>(y), *g = sums.gain.ptr<float>(y), *w = sums.weight.ptr<float>(y);
+    float* o = D.ptr<float>(y);
+    for (int x = 0; x < R; ++x) {
+      if (!(w[x] > 0.0f)) continue;
+      const float kept = g[x] / w[x];
+      if (soft) o[x] = v[x] / w[x] / std::max(kept, kSoftGateShareFloor);
+      else o[x] = kept > 1e-4f ? v[x] / g[x] : 0.0f;
+    }
+  }
+  return D;
+}
+
 cv::Mat DetailRegressor::Regress(const cv::Mat& gray, const cv::Mat& seen, DetailTiming* timing) const {
   const Impl& m = *impl_;
   Require(m.fixed, "DetailRegressor::Regress: the layout is not fixed yet (add the first N frames with "
@@ -611,9 +704,7 @@ cv::Mat DetailRegressor::Regress(const cv::Mat& gray, const cv::Mat& seen, Detai
   // 0. T^t (flattened) and the drops; 1. its patches t_i on the fixed layout.
   const Impl::Prepared p = m.Prepare(gray, seen, &t);
   auto t0 = Clock::now();
-  Eigen::MatrixXf sampled;  // N × n, column-major (PatchSampler's layout)
-  m.sampler->Sample(p.input.gray, &sampled);
-  RowMatrixXf patches = sampled;  // one patch per row, for RegressBatch (normalised in place)
+  RowMatrixXf patches = m.SampleRows(p.input.gray, p);  // one patch per row, for RegressBatch (normalised in place)
   t.sample_ms += MsSince(t0);
 
   // 2. Eq. 6: c_i = c̄ + Σ_k R^k(t_i).
@@ -645,7 +736,7 @@ cv::Mat DetailRegressor::AssembleFromTruth(const cv::Mat& gray, const cv::Mat& s
   const Impl::Prepared p = m.Prepare(gray, seen, &t);
   // 2'. The truth's own patches projected onto the model's basis: c_i = basisᵀ (d_i − mean).
   const auto t0 = Clock::now();
-  const RowMatrixXf c = m.model.pca.ProjectPatches(m.sampler->Sample(truth));
+  const RowMatrixXf c = m.model.pca.ProjectPatches(Eigen::MatrixXf(m.SampleRows(truth, p)));
   t.regress_ms = MsSince(t0);
   const cv::Mat D = m.Assemble(c, p, &t);
   if (timing) *timing = t;
@@ -662,13 +753,13 @@ void DetailRegressor::CutPairs(const cv::Mat& gray, const cv::Mat& seen, const c
   Require(cv::checkRange(truth), "DetailRegressor::CutPairs: the truth map has non-finite values");
   const int N = m.layout.num_patches(), n = m.layout.patch_size * m.layout.patch_size;
   std::vector<int> kept;
-  Eigen::MatrixXf t_all, d_all;
+  RowMatrixXf t_all, d_all;
   if (N > 0) {
     const Impl::Prepared p = m.Prepare(gray, seen, nullptr);
     for (int k = 0; k < N; ++k)
       if (!p.drop[k]) kept.push_back(k);
-    m.sampler->Sample(p.input.gray, &t_all);
-    d_all = m.sampler->Sample(truth);
+    t_all = m.SampleRows(p.input.gray, p);
+    d_all = m.SampleRows(truth, p);
   }
   const auto rows = static_cast<Eigen::Index>(kept.size());
   texture->resize(rows, n);

@@ -103,6 +103,14 @@
 //      (also without flattening), so that D^t follows the neutral frames'
 //      registration. The wrinkle map's per-texel frame counts J_p stay those of the
 //      unaligned frames.
+//   7. Optionally (recentre_radius > 0) the patches move with their lines in every frame
+//      (options above): the DoG response at 2·⌊radius/step⌋ + 1 candidate centres per
+//      patch (the gate's windowed DoG), then the patches are sampled and merged on the
+//      moved frames without the precomputed sampler (SamplePatches / SplatPatches,
+//      patches.h): Σ g_k w_k d_k / Σ g_k w_k over this frame's patches, the soft gate's
+//      floor on the share as in step 4. The unseen check keeps the layout's footprints,
+//      and texels the moved patches reach beyond the layout's coverage are left to the
+//      fill, whose known texels stay the layout's. Measured effect: docs/detail-path.md.
 #pragma once
 
 #include <cstdint>
@@ -161,6 +169,15 @@ struct DetailRegressionOptions {
   // band 0.335 → 0.354, still face 0.844 → 0.843, jitter 2.3 → 1.8 µm. s = 1: R2
   // still face 0.870, but a higher normal error (R2 1.10 ×, R3 1.64 ×).
   double gate_softness = 0.75;
+  // Re-centring (Difference 7, not in the paper; 0 = off, the paper): in every frame each
+  // patch moves along its x axis e1 (across its line) to the candidate centre, within
+  // ±recentre_radius of its place in the layout at steps of recentre_step, where the
+  // frame's DoG response is largest (refined between steps by a parabola), and is
+  // sampled and merged there. Texels at the model's dog_reference_resolution, like the
+  // DoG's σ. The tracker's texture drifts 1–3 mm on the skin during a capture, so a line
+  // leaves the patch the wrinkle frames laid on it.
+  double recentre_radius = 0.0;
+  double recentre_step = 1.0;
   PoissonFillOptions fill;  // Sec. 5.2 Poisson fill (poisson_fill.h)
   // Difference 6 (reference_alignment.h; off by default): align the reference to every
   // T^t before flattening (with the model's texture_reference ratio or difference), or

@@ -96,6 +96,22 @@ inline Stencil MakeStencil(float x, float y, int cols, int rows) {
   return st;
 }
 
+// The four bilinear taps of sample (a, b) of patch `f`, as f(texel, weight), weights > 0
+// only; the adjoint of SamplePatch (PatchSampler's splat and SplatPatches).
+template <typename F>
+inline void ForEachTap(const PatchFrame& f, const Axes& e, int w, int S, int a, int b, const F& fn) {
+  float x, y;
+  SamplePosition(f, e, w, a, b, &x, &y);
+  const Stencil st = MakeStencil(x, y, S, S);
+  const int32_t o = st.y0 * S + st.x0;
+  const float w00 = (1.0f - st.fx) * (1.0f - st.fy), w01 = st.fx * (1.0f - st.fy);
+  const float w10 = (1.0f - st.fx) * st.fy, w11 = st.fx * st.fy;
+  if (w00 > 0.0f) fn(o, w00);
+  if (w01 > 0.0f) fn(o + 1, w01);
+  if (w10 > 0.0f) fn(o + S, w10);
+  if (w11 > 0.0f) fn(o + S + 1, w11);
+}
+
 // The bilinear value; `p` points at the top-left tap, `step` is the row stride in floats.
 inline float Apply(const float* p, size_t step, float fx, float fy) {
   const float top = (1.0f - fx) * p[0] + fx * p[1];
@@ -321,17 +337,8 @@ PatchSampler::PatchSampler(const PatchLayout& layout) : impl_(std::make_unique<I
   auto for_each_tap = [&](const auto& f) {
     for (int k = 0; k < m.N; ++k) {
       for (int s = 0; s < ww; ++s) {
-        float x, y;
-        SamplePosition(layout.patches[k], axes[k], m.w, s % m.w, s / m.w, &x, &y);
-        const Stencil st = MakeStencil(x, y, m.S, m.S);
-        const int32_t o = st.y0 * m.S + st.x0;
         const int32_t i = static_cast<int32_t>(static_cast<int64_t>(s) * m.N + k);
-        const float w00 = (1.0f - st.fx) * (1.0f - st.fy), w01 = st.fx * (1.0f - st.fy);
-        const float w10 = (1.0f - st.fx) * st.fy, w11 = st.fx * st.fy;
-        if (w00 > 0.0f) f(o, i, w00);
-        if (w01 > 0.0f) f(o + 1, i, w01);
-        if (w10 > 0.0f) f(o + m.S, i, w10);
-        if (w11 > 0.0f) f(o + m.S + 1, i, w11);
+        ForEachTap(layout.patches[k], axes[k], m.w, m.S, s % m.w, s / m.w, [&](int32_t t, float wt) { f(t, i, wt); });
       }
     }
   };
@@ -415,6 +422,45 @@ cv::Mat PatchSampler::Splat(const Eigen::MatrixXf& patches) const {
       o[t] = sum / weight[t];
     }
   });
+  return out;
+}
+
+void SamplePatches(const cv::Mat& map, const std::vector<PatchFrame>& frames, int w, float* rows) {
+  RequireMap(map, "SamplePatches");
+  const cv::Mat src = map.isContinuous() ? map : map.clone();
+  const int N = static_cast<int>(frames.size());
+  const size_t n = static_cast<size_t>(w) * w;
+  tbb::parallel_for(tbb::blocked_range<int>(0, N, 8), [&](const tbb::blocked_range<int>& r) {
+    for (int k = r.begin(); k != r.end(); ++k) SamplePatch(src, frames[k], w, rows + k * n);
+  });
+}
+
+SplatSums SplatPatches(const std::vector<PatchFrame>& frames, int w, int S, const float* rows,
+                       const std::vector<float>& gain) {
+  Require(S >= 2 && w >= 1, fmt::format("SplatPatches: map size {} must be >= 2 and patch size {} >= 1", S, w));
+  Require(gain.size() == frames.size(),
+          fmt::format("SplatPatches: {} gains for {} patches", gain.size(), frames.size()));
+  SplatSums out{cv::Mat(S, S, CV_32F, cv::Scalar(0)), cv::Mat(S, S, CV_32F, cv::Scalar(0)),
+                cv::Mat(S, S, CV_32F, cv::Scalar(0))};
+  float* value = out.value.ptr<float>(0);
+  float* g = out.gain.ptr<float>(0);
+  float* weight = out.weight.ptr<float>(0);
+  const size_t n = static_cast<size_t>(w) * w;
+  for (size_t k = 0; k < frames.size(); ++k) {  // sequential, in patch order: deterministic
+    const Axes e(frames[k].angle);
+    const float* d = rows + k * n;
+    const float gk = gain[k];
+    for (int b = 0; b < w; ++b) {
+      for (int a = 0; a < w; ++a) {
+        const float dv = d[b * w + a];
+        ForEachTap(frames[k], e, w, S, a, b, [&](int32_t t, float wt) {
+          value[t] += wt * dv;
+          g[t] += wt * gk;
+          weight[t] += wt;
+        });
+      }
+    }
+  }
   return out;
 }
 

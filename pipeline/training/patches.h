@@ -141,6 +141,21 @@ class PatchSampler {
   std::unique_ptr<Impl> impl_;
 };
 
+// Patches placed anew in every frame (the capture's re-centring,
+// DetailRegressionOptions::recentre_radius; not in the paper), without a precomputed
+// sampler. SamplePatches: SamplePatch of every frame into rows[k·w² …] (row k = patch k,
+// row-major N × w²), in parallel. SplatPatches: with the bilinear weights w_k(t) of patch
+// k's samples (the adjoint of sampling, as PatchSampler::Splat), the S×S sums (CV_32F)
+//   value(t) = Σ_k Σ_samples w_k(t) d_k,   gain(t) = Σ_k g_k w_k(t),   weight(t) = Σ_k w_k(t)
+// of the rows d_k (N × w², row-major) and per-patch gains g_k; sequential in patch order, so
+// deterministic. Throws Error on a bad map, size or a gain count unlike the patch count.
+void SamplePatches(const cv::Mat& map, const std::vector<PatchFrame>& frames, int w, float* rows);
+struct SplatSums {
+  cv::Mat value, gain, weight;
+};
+SplatSums SplatPatches(const std::vector<PatchFrame>& frames, int w, int S, const float* rows,
+                       const std::vector<float>& gain);
+
 // Training-pair augmentation (not in the paper; TrainingOptions::pair_shift_texels and
 // pair_shift_steps): the layout followed by every patch repeated with its centre moved
 // across its line, along its x axis e1, by k · shift texels for k = ±1 … ±steps (same
