@@ -199,6 +199,8 @@ void BM_Regress(benchmark::State& state) {
   DetailRegressionOptions o;
   o.gate_by_response = state.range(1) != 0;
   o.gate_softness = state.range(1) == 2 ? 0.75 : 0.0;
+  o.recentre_radius = static_cast<double>(state.range(2));  // Difference 7, steps of 2 texels
+  o.recentre_step = 2.0;
   const DetailRegressor r = MakeRegressor(o);
   const Setup& s = TheSetup();
   // Mean and minimum per sub-step (the minimum is robust to other jobs on the machine).
@@ -228,7 +230,7 @@ void BM_Regress(benchmark::State& state) {
   for (int i = 0; i < 6; ++i) state.counters[names[i]] = lo[i];
   const char* png = std::getenv("CREASE_DETAIL_PNG");
   static bool written[2] = {false, false};
-  if (png && state.range(0) == 2 && !written[o.gate_by_response]) {
+  if (png && state.range(0) == 2 && state.range(2) == 0 && !written[o.gate_by_response]) {
     written[o.gate_by_response] = true;
     // D^t of every frame, ±range mm (the largest |D| over the frames without the gate).
     const fs::path base(png);
@@ -261,8 +263,17 @@ void BM_Regress(benchmark::State& state) {
     }
   }
 }
-// Args: threads, the response gate (0 off, 1 hard, 2 soft: gate_softness 0.75).
-BENCHMARK(BM_Regress)->Args({1, 0})->Args({2, 0})->Args({2, 1})->Args({2, 2})->Unit(benchmark::kMillisecond)->UseRealTime();
+// Args: threads, the response gate (0 off, 1 hard, 2 soft: gate_softness 0.75), the
+// re-centring radius in texels (0 off; steps of 2 texels).
+BENCHMARK(BM_Regress)
+    ->Args({1, 0, 0})
+    ->Args({2, 0, 0})
+    ->Args({2, 1, 0})
+    ->Args({2, 2, 0})
+    ->Args({1, 2, 8})
+    ->Args({2, 2, 8})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 void BM_FixLayout(benchmark::State& state) {
   const Setup& s = TheSetup();
