@@ -611,6 +611,18 @@ def point_label(point):
     return ", ".join(f"{k}={fmt_value(v)}" for k, v in sorted(point.items())) or "all runs"
 
 
+def bar_colours(n):
+    """n distinct colours: tab10's up to 10; up to 20 tab20's dark shades, then its light
+    ones (neighbours in tab20 are two shades of one hue); beyond, viridis evenly."""
+    plt = pyplot()
+    if n <= 10:
+        return [plt.get_cmap("tab10")(i) for i in range(n)]
+    if n <= 20:
+        tab20 = plt.get_cmap("tab20")
+        return [tab20(2 * i if i < 10 else 2 * (i - 10) + 1) for i in range(n)]
+    return [plt.get_cmap("viridis")(i / (n - 1)) for i in range(n)]
+
+
 def figure_bar(exp, spec):
     ys = spec["y"] if isinstance(spec["y"], list) else [spec["y"]]
     points = exp.points()
@@ -618,13 +630,14 @@ def figure_bar(exp, spec):
         raise ValueError("no successful run")
     fig, (ax,) = subplots(1)
     width = 0.8 / len(points)
+    colours = bar_colours(len(points))
     for j, p in enumerate(points):
         rs = exp.runs_at(p)
         stats = [mean_std(r.metric(y) for r in rs) for y in ys]
         means = [np.nan if m is None else m for m, _, _ in stats]
         stds = [0.0 if s is None else s for _, s, _ in stats]
         pos = np.arange(len(ys)) + (j - (len(points) - 1) / 2.0) * width
-        ax.bar(pos, means, width * 0.9, yerr=stds, capsize=3,
+        ax.bar(pos, means, width * 0.9, yerr=stds, capsize=3, color=colours[j],
                label=point_label(p) if len(points) > 1 else None)
     ax.set_xticks(np.arange(len(ys)))
     # Optional short tick labels ("labels": one per y); default: the metric keys.
@@ -633,7 +646,10 @@ def figure_bar(exp, spec):
     ax.set_ylabel(spec.get("y_label", ""))
     ax.set_title(spec.get("title", spec.get("name", "")))
     ax.grid(alpha=0.3, axis="y")
-    if len(points) > 1:
+    if len(points) > 4:  # beside the axes (inside, a long legend covers the bars), on a wider figure
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+        fig.set_size_inches(11, 5)
+    elif len(points) > 1:
         ax.legend(loc="best")
     return fig, "mean ± std over seeds"
 

@@ -290,6 +290,48 @@ TEST(PatchesTest, SamplerMatchesSamplePatchAndSplatReproducesSmoothMaps) {
       }
 }
 
+// The per-frame path of the capture's re-centring (SamplePatches / SplatPatches) agrees
+// with the precomputed sampler on the same frames: the same samples to the bit, weight
+// = splat_weight, value / weight = Splat (up to the summation order), and the gains
+// weigh whole patches.
+TEST(PatchesTest, PerFrameSamplingAndSplatAgreeWithTheSampler) {
+  const int S = 128, w = 16;
+  const SyntheticMap m = MakeSyntheticMap(S, 5);
+  PatchLayoutOptions o;
+  o.patch_size = w;
+  const PatchLayout layout = PlacePatches(m.probability, m.angle, cv::Mat(), m.coverage, o);
+  const int N = layout.num_patches();
+  ASSERT_GT(N, 3);
+  const PatchSampler sampler(layout);
+  cv::Mat smooth(S, S, CV_32F);
+  for (int y = 0; y < S; ++y)
+    for (int x = 0; x < S; ++x) smooth.at<float>(y, x) = static_cast<float>(std::sin(x / 20.0) * std::cos(y / 25.0));
+  const Eigen::MatrixXf reference = sampler.Sample(smooth);
+  Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> rows(N, w * w);
+  SamplePatches(smooth, layout.patches, w, rows.data());
+  ASSERT_TRUE(rows == reference);
+  const cv::Mat merged = sampler.Splat(reference);
+  const SplatSums sums = SplatPatches(layout.patches, w, S, rows.data(), std::vector<float>(N, 1.0f));
+  for (int y = 0; y < S; ++y)
+    for (int x = 0; x < S; ++x) {
+      const float weight = sums.weight.at<float>(y, x);
+      ASSERT_NEAR(weight, sampler.splat_weight().at<float>(y, x), 1e-4f) << x << "," << y;
+      ASSERT_EQ(sums.gain.at<float>(y, x), weight) << x << "," << y;
+      if (weight > 0) {
+        ASSERT_NEAR(sums.value.at<float>(y, x) / weight, merged.at<float>(y, x), 1e-5f) << x << "," << y;
+      }
+    }
+  // A gain of 0 on patch 0 leaves only the other patches' weight in `gain`.
+  std::vector<float> gain(N, 1.0f);
+  gain[0] = 0.0f;
+  const SplatSums without = SplatPatches(layout.patches, w, S, rows.data(), gain);
+  const cv::Point c(static_cast<int>(std::lround(layout.patches[0].center_texel.x())),
+                    static_cast<int>(std::lround(layout.patches[0].center_texel.y())));
+  EXPECT_LT(without.gain.at<float>(c), without.weight.at<float>(c) - 0.5f);
+  EXPECT_ERROR_HAS(SplatPatches(layout.patches, w, S, rows.data(), std::vector<float>(N - 1, 1.0f)),
+                   "gains for");
+}
+
 TEST(PatchesTest, TrainingPairsOnlyAboveAlpha) {
   const int S = 64;
   PatchLayout layout;
