@@ -79,6 +79,14 @@ float GateWeight(float response, float alpha, float softness) {
 // layout's spacing of about half a patch (PlacePatches) keeps its full value.
 constexpr float kSoftGateShareFloor = 0.25f;
 
+// A texel's merge `merged` (Σ_kept w d / Σ_all w) divided by its kept share `kept` (Σ_kept w
+// / Σ_all w): under the soft gate by at least kSoftGateShareFloor; with the hard gate 0
+// where (almost) nothing was kept. Shared by RenormaliseDropped and MergeMoved.
+float DivideByKeptShare(float merged, float kept, bool soft) {
+  if (soft) return merged / std::max(kept, kSoftGateShareFloor);
+  return kept > 1e-4f ? merged / kept : 0.0f;
+}
+
 // 1D Gaussian of σ truncated at 3σ (it is normalised per texel anyway: the gate
 // evaluates normalised convolutions like DogResponse, whose OpenCV kernels reach 4σ;
 // the difference is < 0.3 % of the kernel mass), normalised.
@@ -643,11 +651,7 @@ void DetailRegressor::Impl::RenormaliseDropped(const Prepared& p, cv::Mat* D) co
     }
   }
   float* o = D->ptr<float>(0);
-  for (int32_t i : touched) {
-    const float kept = 1.0f - acc.get()[i];
-    if (soft) o[i] /= std::max(kept, kSoftGateShareFloor);
-    else o[i] = kept > 1e-4f ? o[i] / kept : 0.0f;
-  }
+  for (int32_t i : touched) o[i] = DivideByKeptShare(o[i], 1.0f - acc.get()[i], soft);
 }
 
 RowMatrixXf DetailRegressor::Impl::SampleRows(const cv::Mat& map, const Prepared& p) const {
@@ -664,8 +668,8 @@ RowMatrixXf DetailRegressor::Impl::SampleRows(const cv::Mat& map, const Prepared
 }
 
 // The average of step 4 on this frame's moved patches: the rows of `d` (already scaled
-// by the gate's weights g_k, dropped rows 0) splatted, divided by Σ g_k w_k(t) — under
-// the soft gate by at least kSoftGateShareFloor · Σ w_k(t), as RenormaliseDropped does.
+// by the gate's weights g_k, dropped rows 0) splatted and divided by the kept share
+// Σ g_k w_k(t) / Σ w_k(t) (DivideByKeptShare, as RenormaliseDropped).
 cv::Mat DetailRegressor::Impl::MergeMoved(const Eigen::MatrixXf& d, const Prepared& p) const {
   const int N = layout.num_patches();
   std::vector<float> gain(N);
@@ -677,12 +681,8 @@ cv::Mat DetailRegressor::Impl::MergeMoved(const Eigen::MatrixXf& d, const Prepar
   for (int y = 0; y < R; ++y) {
     const float *v = sums.value.ptr<float>(y), *g = sums.gain.ptr<float>(y), *w = sums.weight.ptr<float>(y);
     float* o = D.ptr<float>(y);
-    for (int x = 0; x < R; ++x) {
-      if (!(w[x] > 0.0f)) continue;
-      const float kept = g[x] / w[x];
-      if (soft) o[x] = v[x] / w[x] / std::max(kept, kSoftGateShareFloor);
-      else o[x] = kept > 1e-4f ? v[x] / g[x] : 0.0f;
-    }
+    for (int x = 0; x < R; ++x)
+      if (w[x] > 0.0f) o[x] = DivideByKeptShare(v[x] / w[x], g[x] / w[x], soft);
   }
   return D;
 }
