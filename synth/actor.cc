@@ -39,6 +39,7 @@ void ActorOptions::VisitFields(OptionVisitor& v) {
   v.Field("strain_resolution", strain_resolution);
   v.Field("strain_smoothing_mm", strain_smoothing_mm);
   v.Field("phong_alpha", phong_alpha);
+  v.Field("subdivision_levels", subdivision_levels);
 }
 
 void ActorOptions::Check() const {
@@ -66,6 +67,8 @@ void ActorOptions::Check() const {
   CheckGe(o, "strain_smoothing_mm", strain_smoothing_mm, 0.0);
   CheckGe(o, "phong_alpha", phong_alpha, 0.0);
   CheckLe(o, "phong_alpha", phong_alpha, 1.0);
+  CheckGe(o, "subdivision_levels", subdivision_levels, 0);
+  CheckLe(o, "subdivision_levels", subdivision_levels, 4);
 }
 
 Actor GenerateActor(const FaceRig& rig, uint64_t seed, const ActorOptions& options) {
@@ -441,11 +444,14 @@ ActorModel::ActorModel(const FaceRig& rig, const Actor& actor) : rig_(PersonalRi
   const int R = actor_.options.resolution;
   anchors_ = ComputeFaceAnchors(rig_);
   layout_ = BuildHiResLayout(rig_, R);
+  int S = R;
   if (layout_.num_vertices() > 0 && layout_.num_vertices() < actor_.options.surface_min_vertices) {
     // Finer grid: vertex count grows with S², plus a margin for the chart boundary.
     const double scale = std::sqrt(static_cast<double>(actor_.options.surface_min_vertices) / layout_.num_vertices());
-    const int S = std::min(8192, static_cast<int>(std::ceil(R * scale * 1.01)) + 1);
-    layout_ = BuildHiResLayout(rig_, S, R);
+    S = std::min(8192, static_cast<int>(std::ceil(R * scale * 1.01)) + 1);
+  }
+  if (S != R || actor_.options.subdivision_levels > 0) {
+    layout_ = BuildHiResLayout(rig_, S, R, actor_.options.subdivision_levels);
   }
   WrinkleStrainOptions so;
   so.resolution = actor_.options.strain_resolution;

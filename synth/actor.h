@@ -72,6 +72,9 @@ struct ActorOptions {
   int strain_resolution = 256;     // metric-tensor map size for wrinkle compression, texels
   double strain_smoothing_mm = 3.0;  // σ smoothing the compression field, mm
   double phong_alpha = kDefaultPhongAlpha;  // α: rounding of the coarse facets under the hi-res surface
+  int subdivision_levels = 0;      // > 0: the hi-res surface's base is the rig's Loop subdivision surface
+                                   //   after this many steps (smooth across the coarse edges; phong_alpha
+                                   //   unused), BuildHiResLayout; 0: the Phong-tessellated coarse facets
   double expression_deviation = 0.3;        // σ of the personal expression deviations (0 = none)
   double expression_deviation_wavelength_mm = 40.0;  // their feature size, mm
 

@@ -1,6 +1,7 @@
 #include "synth/hires_surface.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include <fmt/format.h>
@@ -14,7 +15,123 @@
 
 namespace crease {
 
-HiResLayout BuildHiResLayout(const FaceRig& rig, int resolution, int map_resolution) {
+namespace {
+
+// Per vertex, the vertex it is joined to for the subdivision's topology: the lowest id
+// of its seam split (FaceRig::original_vertex; without it, equal neutral positions and
+// expression deltas).
+std::vector<int> SeamRepresentatives(const FaceRig& rig) {
+  const int n = rig.num_vertices();
+  std::vector<int> order(n), rep(n);
+  for (int v = 0; v < n; ++v) order[v] = rep[v] = v;
+  const bool by_id = static_cast<int>(rig.original_vertex.size()) == n;
+  auto key = [&](int v) {
+    return by_id ? std::array<double, 3>{static_cast<double>(rig.original_vertex[v]), 0.0, 0.0}
+                 : std::array<double, 3>{rig.neutral.V(v, 0), rig.neutral.V(v, 1), rig.neutral.V(v, 2)};
+  };
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return key(a) < key(b); });
+  auto same_motion = [&](int a, int b) {
+    return by_id || (rig.expression_basis.middleRows(3 * a, 3) == rig.expression_basis.middleRows(3 * b, 3));
+  };
+  for (size_t i = 1; i < order.size(); ++i) {
+    const int a = order[i - 1], b = order[i];
+    if (key(a) == key(b) && same_motion(rep[a], b)) rep[b] = rep[a];
+  }
+  return rep;
+}
+
+// The faces within two rings of the chart's (`chart`: rows of rig.neutral.F), over
+// seam representatives, with a compact numbering of their vertices (`input`: the rig
+// vertex of each). Chart faces come first, in `chart`'s order and corner order.
+MatX3i SmoothRegion(const FaceRig& rig, const std::vector<int>& chart, std::vector<int>* input) {
+  const std::vector<int> rep = SeamRepresentatives(rig);
+  const MatX3i& F = rig.neutral.F;
+  const int n = rig.num_vertices();
+  std::vector<std::vector<int>> faces_of(n);
+  for (int f = 0; f < F.rows(); ++f) {
+    const int a = rep[F(f, 0)], b = rep[F(f, 1)], c = rep[F(f, 2)];
+    if (a == b || b == c || c == a) continue;
+    for (int v : {a, b, c}) faces_of[v].push_back(f);
+  }
+  std::vector<char> in_region(F.rows(), 0), seen(n, 0);
+  std::vector<int> ring;
+  for (int f : chart) {
+    for (int k = 0; k < 3; ++k) {
+      const int v = rep[F(f, k)];
+      if (!seen[v]) ring.push_back(v);
+      seen[v] = 1;
+    }
+  }
+  for (int step = 0; step < 2; ++step) {
+    std::vector<int> next;
+    for (int v : ring) {
+      for (int f : faces_of[v]) {
+        in_region[f] = 1;
+        for (int k = 0; k < 3; ++k) {
+          const int u = rep[F(f, k)];
+          if (!seen[u]) next.push_back(u);
+          seen[u] = 1;
+        }
+      }
+    }
+    ring = std::move(next);
+  }
+  std::vector<int> faces = chart;
+  for (int f : chart) in_region[f] = 0;
+  for (int f = 0; f < F.rows(); ++f) {
+    if (in_region[f]) faces.push_back(f);
+  }
+  std::vector<int> local(n, -1);
+  input->clear();
+  MatX3i R(static_cast<int>(faces.size()), 3);
+  for (size_t i = 0; i < faces.size(); ++i) {
+    for (int k = 0; k < 3; ++k) {
+      const int v = rep[F(faces[i], k)];
+      if (local[v] < 0) {
+        local[v] = static_cast<int>(input->size());
+        input->push_back(v);
+      }
+      R(static_cast<int>(i), k) = local[v];
+    }
+  }
+  return R;
+}
+
+// The smooth base of BuildHiResLayout (subdivision_levels > 0).
+void AttachSmoothBase(const FaceRig& rig, int levels, HiResLayout* L) {
+  std::vector<int> chart;  // the layout's coarse triangles, each once
+  std::vector<int> chart_index(rig.neutral.num_faces(), -1);
+  for (int t : L->triangle) {
+    if (chart_index[t] < 0) {
+      chart_index[t] = static_cast<int>(chart.size());
+      chart.push_back(t);
+    }
+  }
+  const MatX3i region = SmoothRegion(rig, chart, &L->smooth_input);
+  for (size_t i = 0; i < chart.size(); ++i) {
+    const Eigen::RowVector3i f = region.row(static_cast<int>(i));
+    Require(f[0] != f[1] && f[1] != f[2] && f[2] != f[0],
+            fmt::format("hi-res layout: chart triangle {} collapses when its seam vertices are joined", chart[i]));
+  }
+  L->smooth = std::make_shared<const LoopSubdivision>(
+      BuildLoopSubdivision(region, static_cast<int>(L->smooth_input.size()), levels));
+  const int nv = L->num_vertices();
+  L->smooth_face.resize(nv);
+  L->smooth_barycentric.resize(nv);
+  for (int v = 0; v < nv; ++v) {
+    int f = chart_index[L->triangle[v]];
+    Eigen::Vector3d b = L->barycentric[v].cast<double>();
+    for (int l = 0; l < levels; ++l) f = 4 * f + LocateLoopChild(&b);
+    L->smooth_face[v] = f;
+    L->smooth_barycentric[v] = b.cast<float>();
+  }
+}
+
+}  // namespace
+
+HiResLayout BuildHiResLayout(const FaceRig& rig, int resolution, int map_resolution, int subdivision_levels) {
+  Require(subdivision_levels >= 0 && subdivision_levels <= 5,
+          fmt::format("BuildHiResLayout: subdivision_levels {} must be in [0, 5]", subdivision_levels));
   Require(resolution >= 2 && resolution <= 8192,
           fmt::format("BuildHiResLayout: resolution {} must be in [2, 8192]", resolution));
   if (map_resolution <= 0) map_resolution = resolution;
@@ -154,24 +271,43 @@ HiResLayout BuildHiResLayout(const FaceRig& rig, int resolution, int map_resolut
   L.cells_across_slits = rejected_slit;
   L.F.resize(static_cast<int>(tris.size()), 3);
   for (size_t f = 0; f < tris.size(); ++f) L.F.row(static_cast<int>(f)) = tris[f].transpose();
+  if (subdivision_levels > 0) AttachSmoothBase(rig, subdivision_levels, &L);
   return L;
 }
 
 namespace {
 
-// Phong-tessellated coarse position and interpolated unit normal at vertex v.
-inline void CoarseAt(const HiResLayout& layout, const TriMesh& coarse, int v, double phong_alpha,
-                     Eigen::RowVector3d* P, Eigen::RowVector3d* N) {
+// The smooth base's subdivided positions for this frame (empty without one).
+MatX3d SmoothPositions(const HiResLayout& layout, const TriMesh& coarse) {
+  if (!layout.smooth) return {};
+  MatX3d X(static_cast<int>(layout.smooth_input.size()), 3);
+  for (int i = 0; i < X.rows(); ++i) X.row(i) = coarse.V.row(layout.smooth_input[i]);
+  return layout.smooth->Apply(X);
+}
+
+// Base position (the smooth base's, from `smooth`, else the Phong-tessellated coarse
+// triangle's) and interpolated unit normal at vertex v.
+inline void CoarseAt(const HiResLayout& layout, const TriMesh& coarse, const MatX3d& smooth, int v,
+                     double phong_alpha, Eigen::RowVector3d* P, Eigen::RowVector3d* N) {
   const int t = layout.triangle[v];
   const Eigen::Vector3f& b = layout.barycentric[v];
   const int i0 = coarse.F(t, 0), i1 = coarse.F(t, 1), i2 = coarse.F(t, 2);
-  const Eigen::RowVector3d flat = b[0] * coarse.V.row(i0) + b[1] * coarse.V.row(i1) + b[2] * coarse.V.row(i2);
-  const double w[3] = {b[0], b[1], b[2]};
-  const double* const corners[3] = {coarse.V.row(i0).data(), coarse.V.row(i1).data(), coarse.V.row(i2).data()};
-  const double* const normals[3] = {coarse.N.row(i0).data(), coarse.N.row(i1).data(), coarse.N.row(i2).data()};
-  double p[3] = {flat[0], flat[1], flat[2]};
-  PhongTessellate(phong_alpha, w, corners, normals, p);
-  *P = Eigen::RowVector3d(p[0], p[1], p[2]);
+  if (smooth.rows() > 0) {
+    const int f = layout.smooth_face[v];
+    const Eigen::Vector3f& c = layout.smooth_barycentric[v];
+    const MatX3i& S = layout.smooth->faces;
+    *P = c[0] * smooth.row(S(f, 0)) + c[1] * smooth.row(S(f, 1)) + c[2] * smooth.row(S(f, 2));
+  } else {
+    const Eigen::RowVector3d flat = b[0] * coarse.V.row(i0) + b[1] * coarse.V.row(i1) + b[2] * coarse.V.row(i2);
+    const double w[3] = {b[0], b[1], b[2]};
+    const double* const corners[3] = {coarse.V.row(i0).data(), coarse.V.row(i1).data(),
+                                      coarse.V.row(i2).data()};
+    const double* const normals[3] = {coarse.N.row(i0).data(), coarse.N.row(i1).data(),
+                                      coarse.N.row(i2).data()};
+    double p[3] = {flat[0], flat[1], flat[2]};
+    PhongTessellate(phong_alpha, w, corners, normals, p);
+    *P = Eigen::RowVector3d(p[0], p[1], p[2]);
+  }
   const Eigen::RowVector3d n = b[0] * coarse.N.row(i0) + b[1] * coarse.N.row(i1) + b[2] * coarse.N.row(i2);
   const double len = n.norm();
   *N = len > 0 ? Eigen::RowVector3d(n / len) : Eigen::RowVector3d(0, 0, 0);
@@ -186,6 +322,9 @@ void CheckCoarse(const HiResLayout& layout, const TriMesh& coarse, double phong_
     if (t < 0) continue;
     Require(layout.triangle[t] < coarse.num_faces(), "hi-res surface: the coarse mesh is not the layout's rig");
   }
+  Require(layout.smooth_input.empty() ||
+              *std::max_element(layout.smooth_input.begin(), layout.smooth_input.end()) < coarse.num_vertices(),
+          "hi-res surface: the coarse mesh is not the layout's rig");
 }
 
 }  // namespace
@@ -196,10 +335,11 @@ void InterpolateCoarse(const HiResLayout& layout, const TriMesh& coarse, MatX3d*
   const int nv = layout.num_vertices();
   P->resize(nv, 3);
   N->resize(nv, 3);
+  const MatX3d smooth = SmoothPositions(layout, coarse);
   tbb::parallel_for(tbb::blocked_range<int>(0, nv, 8192), [&](const tbb::blocked_range<int>& r) {
     for (int v = r.begin(); v < r.end(); ++v) {
       Eigen::RowVector3d p, n;
-      CoarseAt(layout, coarse, v, phong_alpha, &p, &n);
+      CoarseAt(layout, coarse, smooth, v, phong_alpha, &p, &n);
       P->row(v) = p;
       N->row(v) = n;
     }
@@ -217,10 +357,11 @@ TriMesh BuildHiResSurface(const HiResLayout& layout, const TriMesh& coarse, cons
   TriMesh mesh;
   const int nv = layout.num_vertices();
   mesh.V.resize(nv, 3);
+  const MatX3d smooth = SmoothPositions(layout, coarse);
   tbb::parallel_for(tbb::blocked_range<int>(0, nv, 8192), [&](const tbb::blocked_range<int>& r) {
     for (int v = r.begin(); v < r.end(); ++v) {
       Eigen::RowVector3d p, n;
-      CoarseAt(layout, coarse, v, phong_alpha, &p, &n);
+      CoarseAt(layout, coarse, smooth, v, phong_alpha, &p, &n);
       mesh.V.row(v) = p + layout.SampleMap(displacement, v) * n;
     }
   });

@@ -13,7 +13,11 @@
 // maps sampled at the vertex). B is Phong tessellation (Boubekeur & Alexa 2008) of the
 // coarse triangle with shape factor α: α = 0 is the flat coarse triangle, the
 // default 0.75 rounds the coarse facets off (they would otherwise show under
-// raking light); it departs from the flat triangle by ~ edge² · curvature / 8. Grid cells whose four corners are covered become two
+// raking light); it departs from the flat triangle by ~ edge² · curvature / 8.
+// Phong tessellation is only C0 across the coarse edges: each facet keeps a crease
+// along its edges whose angle changes with the expression. Alternatively B is the
+// rig's Loop subdivision surface (BuildHiResLayout's subdivision_levels), smooth
+// across them. Grid cells whose four corners are covered become two
 // triangles (orientation follows the coarse chart); cells spanning a UV cut (a
 // 3D edge much longer than the local texel size at neutral) or a slit (corners
 // on coarse triangles that share no vertex and no edge-joined vertex pair, e.g.
@@ -24,11 +28,13 @@
 // wrinkle walls are slightly sheared rather than offset.
 #pragma once
 
+#include <memory>
 #include <vector>
 
 #include <opencv2/core/mat.hpp>
 
 #include "core/face_rig.h"
+#include "core/loop_subdivision.h"
 #include "core/tri_mesh.h"
 #include "core/types.h"
 
@@ -47,6 +53,14 @@ struct HiResLayout {
   int cells_across_slits = 0;             // grid cells dropped because their corners lie on
                                           //   coarse triangles not joined in the rig's topology
   MatX2d UV;                              // per vertex: texel centre ((i+0.5)/R, (j+0.5)/R)
+  // The smooth base (BuildHiResLayout's subdivision_levels > 0; empty: the Phong-tessellated
+  // coarse triangles): the Loop subdivision of the rig's mesh around the face chart, its input
+  // vertices (rows of the coarse mesh), and per vertex its face on the subdivided mesh and
+  // barycentrics there (the coarse triangle and barycentrics carried down, LocateLoopChild).
+  std::shared_ptr<const LoopSubdivision> smooth;
+  std::vector<int> smooth_input;
+  std::vector<int> smooth_face;
+  std::vector<Eigen::Vector3f> smooth_barycentric;
 
   int num_vertices() const { return static_cast<int>(texel.size()); }
   // Bilinear sample of an R×R CV_32F map at vertex v (exactly the texel when S = R).
@@ -62,12 +76,21 @@ struct HiResLayout {
 };
 
 // Precomputes the S×S grid for the rig's face chart (FaceChartTriangles),
-// sampling R×R maps (map_resolution; 0 = S).
-HiResLayout BuildHiResLayout(const FaceRig& rig, int resolution, int map_resolution = 0);
+// sampling R×R maps (map_resolution; 0 = S). `subdivision_levels` > 0: the base B is the
+// rig's Loop subdivision surface after that many steps (core/loop_subdivision.h), piecewise
+// flat on triangles 2^−L of a coarse edge, instead of the Phong-tessellated coarse
+// triangles: smooth across the coarse edges, as skin is. The subdivision runs on the
+// faces within two rings of the chart (every chart vertex's rules see its whole
+// neighbourhood; the region's artificial rim changes positions less than one coarse ring
+// inwards), with the vertices of seam splits joined (FaceRig::original_vertex, else equal
+// neutral positions and expression deltas); lips and eyelids stay open (boundary rules).
+HiResLayout BuildHiResLayout(const FaceRig& rig, int resolution, int map_resolution = 0,
+                             int subdivision_levels = 0);
 
-// Coarse surface interpolated at the hi-res vertices: positions P (= B above) and unit
-// normals N (#hi-res × 3). `coarse`: the rig mesh of the frame with normals
-// (N of VertexNormals). Parallel, deterministic.
+// Coarse surface interpolated at the hi-res vertices: positions P (= B above, or the
+// layout's smooth base, which ignores phong_alpha) and unit normals N (#hi-res × 3, the
+// interpolated coarse normals either way). `coarse`: the rig mesh of the frame with
+// normals (N of VertexNormals). Parallel, deterministic.
 inline constexpr double kDefaultPhongAlpha = 0.75;
 void InterpolateCoarse(const HiResLayout& layout, const TriMesh& coarse, MatX3d* P, MatX3d* N,
                        double phong_alpha = kDefaultPhongAlpha);
