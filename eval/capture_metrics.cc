@@ -54,6 +54,7 @@ void CaptureEvalOptions::VisitFields(OptionVisitor& v) {
   v.Field("truth_maps_dir", truth_maps_dir);
   v.Field("registered_truth", registered_truth);
   v.Field("wrinkle_regions", wrinkle_regions);
+  v.Field("rim_margin_mm", rim_margin_mm);
   v.Field("surface_max_distance_mm", surface_max_distance_mm);
   v.Field("surface_mesh_resolution", surface_mesh_resolution);
   v.Field("surface_phong_alpha", surface_phong_alpha);
@@ -72,6 +73,7 @@ void CaptureEvalOptions::Check() const {
   appearance.Check();
   CheckGe(o, "surface_every", surface_every, 0);
   CheckGt(o, "band_mm", band_mm, 0.0);
+  CheckGe(o, "rim_margin_mm", rim_margin_mm, 0.0);
   CheckGt(o, "normal_band_low_mm", normal_band_low_mm, 0.0);
   CheckGt(o, "surface_max_distance_mm", surface_max_distance_mm, 0.0);
   CheckGe(o, "surface_mesh_resolution", surface_mesh_resolution, 8);
@@ -804,12 +806,13 @@ void CaptureEvalContext::SetUpFaceChart() {
   face_mesh.F = face_F;
   R = cap.value("map_resolution", 1024);
   coverage = CoverageMask(RasterizeUv(face_mesh, R, R, "rig face chart"));
-  wrinkle_mask = ValidRegionMask(rig.regions, options.wrinkle_regions, R, coverage);
+  mm_per_texel = std::max(MmPerTexel(face_mesh, R), 1e-9);
+  const cv::Mat skin = AwayFromRims(coverage, options.rim_margin_mm / mm_per_texel);
+  wrinkle_mask = ValidRegionMask(rig.regions, options.wrinkle_regions, R, skin);
   for (const std::string& name : options.wrinkle_regions) {
-    cv::Mat m = ValidRegionMask(rig.regions, {name}, R, coverage);
+    cv::Mat m = ValidRegionMask(rig.regions, {name}, R, skin);
     if (cv::countNonZero(m) > 0) region_masks.emplace_back(name, std::move(m));
   }
-  mm_per_texel = std::max(MmPerTexel(face_mesh, R), 1e-9);
   band_mask = MakeWrinkleBandMask(coverage, options.band_mm / mm_per_texel);
   normal_low_mask = MakeWrinkleBandMask(coverage, options.normal_band_low_mm / mm_per_texel);
   offset_mask = ValidRegionMask(rig.regions, {options.offset_region}, R, coverage);

@@ -97,6 +97,10 @@ struct CaptureEvalOptions {
   // The regions of the wrinkle metrics (rig region masks).
   std::vector<std::string> wrinkle_regions = {"forehead", "glabella", "left_eye", "right_eye", "left_cheek",
                                               "right_cheek"};
+  // The wrinkle regions without a margin (mm) along the chart's open edges (the lid margins,
+  // lip rims, nostrils; AwayFromRims): every metric over the wrinkle regions then scores
+  // the skin between them only. 0 = the whole regions (the issue 17 figures).
+  double rim_margin_mm = 0.0;
   // Rays from H^t farther than this from the true surface count as misses, mm.
   double surface_max_distance_mm = 5.0;
   // Resolution of the H^t grid rebuilt for the surface metrics (hifi_mesh_resolution).

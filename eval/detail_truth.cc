@@ -211,6 +211,7 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
     const DetailExtractor extractor(meshes[0], options.detail, sa.scans[sa.neutral].mesh.string(), others);
     const double sigma = options.band_mm / std::max(MmPerTexel(meshes[0], R), 1e-9);
     const cv::Mat regions = ValidRegionMask(rig.regions, options.regions, R, extractor.coverage());
+    const cv::Mat away = AwayFromRims(extractor.coverage(), options.rim_margin_mm / MmPerTexel(meshes[0], R));
     const Eigen::VectorXd neutral_beta = Eigen::VectorXd::Zero(rig.num_expressions());
     const cv::Mat neutral_distance = truth.SurfaceDistance(neutral_beta, meshes[0], options.exact_phong_alpha);
     for (size_t j = 0; j < meshes.size(); ++j) {
@@ -224,6 +225,8 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
       const cv::Mat detail = wrinkles + band;
       const WrinkleBandMask bm = MakeWrinkleBandMask(mask, sigma);
       const cv::Mat db = WrinkleBand(d.displacement, bm);
+      cv::bitwise_and(mask, away, mask);
+      cv::bitwise_and(region_mask, away, region_mask);
       ExtractionTruthRow row;
       row.actor = sa.name;
       row.scan = scan.name;

@@ -132,6 +132,10 @@ struct ExtractionTruthOptions {
   std::filesystem::path write_truth;
   // The exact detail's base surface: 0 = flat, as H^t's (DetailTruth::ExactDetail).
   double exact_phong_alpha = 0.0;
+  // Compare only texels at least this far (mm) from the chart's open edges: the lips,
+  // eyelids and nostrils and the outer rim, where the extraction's diffusion meets a
+  // boundary. The wrinkle band is still taken on the whole chart. 0 = everywhere.
+  double rim_margin_mm = 0.0;
 };
 // `scans`: a folder from `crease synth scans` (each actor folder holds actor.json,
 // each scan truth.json; the set names its rig). Errors name the file.

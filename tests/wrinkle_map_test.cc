@@ -238,6 +238,27 @@ TEST(WrinkleMapTest, CurvedLineOrientationAlongItsLength) {
   }
 }
 
+TEST(WrinkleMapTest, AwayFromRimsKeepsTheChartOutsideAMarginAlongItsOpenEdges) {
+  // A chart of 100² texels inside a 120² raster with a slit (a mouth) 4 texels tall.
+  cv::Mat coverage(120, 120, CV_8U, cv::Scalar(0));
+  coverage(cv::Rect(10, 10, 100, 100)).setTo(1);  // any non-zero counts
+  coverage(cv::Rect(40, 58, 40, 4)).setTo(0);
+  EXPECT_EQ(cv::countNonZero(AwayFromRims(coverage, 0.0)), cv::countNonZero(coverage));
+  const cv::Mat away = AwayFromRims(coverage, 5.0);
+  EXPECT_EQ(away.at<uint8_t>(30, 30), 255);    // far from every edge
+  EXPECT_EQ(away.at<uint8_t>(53, 60), 255);    // 5 texels above the slit
+  EXPECT_EQ(away.at<uint8_t>(55, 60), 0);      // 3 texels above it
+  EXPECT_EQ(away.at<uint8_t>(64, 60), 0);      // 3 below
+  EXPECT_EQ(away.at<uint8_t>(60, 12), 0);      // 3 from the outer rim
+  EXPECT_EQ(away.at<uint8_t>(60, 5), 0);       // outside the chart
+  // A chart touching the raster's border has a rim there too.
+  const cv::Mat full(50, 50, CV_8U, cv::Scalar(255));
+  const cv::Mat inner = AwayFromRims(full, 3.0);
+  EXPECT_EQ(inner.at<uint8_t>(0, 25), 0);
+  EXPECT_EQ(inner.at<uint8_t>(25, 25), 255);
+  EXPECT_THROW(AwayFromRims(cv::Mat(4, 4, CV_32F, cv::Scalar(1)), 1.0), Error);
+}
+
 TEST(WrinkleMapTest, RegionsRestrictTheMapAndResample) {
   const int S = 128;
   // Regions at 32² (another resolution than the maps): left and right halves.

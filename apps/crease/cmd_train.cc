@@ -85,6 +85,7 @@ void AddTrainCommand(CLI::App& app) {
 struct EvalExtractionArgs {
   std::string scans, config, json_out, write_truth;
   double exact_phong_alpha = 0.0;
+  double rim_margin_mm = 0.0;
   std::vector<std::string> sets;
   int actors = 0;
 };
@@ -99,6 +100,7 @@ void RunEvalExtraction(const EvalExtractionArgs& a) {
   o.max_actors = a.actors;
   o.write_truth = a.write_truth;
   o.exact_phong_alpha = a.exact_phong_alpha;
+  o.rim_margin_mm = a.rim_margin_mm;
   const ExtractionTruthReport r = EvaluateExtraction(a.scans, o);
   std::printf("%s%zu scans in %.1f s\n", r.ToTable().c_str(), r.rows.size(), r.seconds);
   if (!a.json_out.empty()) WriteFileAtomic(a.json_out, [&](std::ostream& out) { out << r.ToJson() << "\n"; });
@@ -120,6 +122,11 @@ void AddEvalExtractionCommand(CLI::App& app) {
   cmd->add_option("--exact-phong-alpha", a->exact_phong_alpha,
                   "The exact detail's base: the compatible surface Phong-tessellated with this shape factor (0 = "
                   "flat, as H^t's base; the studio's surface uses 0.75)")
+      ->capture_default_str();
+  cmd->add_option("--rim-margin-mm", a->rim_margin_mm,
+                  "Compare only texels at least this far (mm) from the chart's open edges (lips, eyelids, nostrils, "
+                  "outer rim); the wrinkle band is still taken on the whole chart")
+      ->check(CLI::Range(0.0, 50.0))
       ->capture_default_str();
   cmd->callback([a] { RunEvalExtraction(*a); });
 }

@@ -311,6 +311,15 @@ cv::Mat MedianTexture(const std::vector<cv::Mat>& textures, const std::vector<cv
   return out;
 }
 
+cv::Mat AwayFromRims(const cv::Mat& coverage, double texels) {
+  Require(coverage.type() == CV_8U, "AwayFromRims: the coverage must be CV_8U");
+  if (texels <= 0) return coverage.clone();
+  cv::Mat padded, distance;
+  cv::copyMakeBorder(coverage, padded, 1, 1, 1, 1, cv::BORDER_CONSTANT, cv::Scalar(0));
+  cv::distanceTransform(padded != 0, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+  return distance(cv::Rect(1, 1, coverage.cols, coverage.rows)) >= texels;
+}
+
 cv::Mat ValidRegionMask(const std::vector<RegionMask>& regions, const std::vector<std::string>& names,
                         int map_size, const cv::Mat& coverage) {
   Require(map_size > 0, fmt::format("ValidRegionMask: map size {} must be > 0", map_size));

@@ -222,6 +222,11 @@ cv::Mat DogResponse(const cv::Mat& gray_texture, const WrinkleMapOptions& option
 cv::Mat ValidRegionMask(const std::vector<RegionMask>& regions, const std::vector<std::string>& names,
                         int map_size, const cv::Mat& coverage = cv::Mat());
 
+// 255 where `coverage` (CV_8U, 255 = covered) lies at least `texels` from an uncovered
+// texel or the raster's border: the chart without a margin along its open edges (lips,
+// eyelids, nostrils, outer rim). All of the coverage when texels ≤ 0.
+cv::Mat AwayFromRims(const cv::Mat& coverage, double texels);
+
 // Where patches may be placed: ValidRegionMask of options.patch_regions minus the
 // options.patch_exclude_regions the rig defines, each dilated by
 // patch_exclude_margin (scaled like the σ, SigmaScale).
