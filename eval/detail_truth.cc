@@ -209,9 +209,10 @@ ExtractionTruthReport EvaluateExtraction(const std::filesystem::path& scans, con
     std::vector<MatX3d> others;
     for (size_t j = 1; j < meshes.size(); ++j) others.push_back(meshes[j].V);
     const DetailExtractor extractor(meshes[0], options.detail, sa.scans[sa.neutral].mesh.string(), others);
-    const double sigma = options.band_mm / std::max(MmPerTexel(meshes[0], R), 1e-9);
+    const double mm_per_texel = std::max(MmPerTexel(meshes[0], R), 1e-9);
+    const double sigma = options.band_mm / mm_per_texel;
     const cv::Mat regions = ValidRegionMask(rig.regions, options.regions, R, extractor.coverage());
-    const cv::Mat away = AwayFromRims(extractor.coverage(), options.rim_margin_mm / MmPerTexel(meshes[0], R));
+    const cv::Mat away = AwayFromRims(extractor.coverage(), options.rim_margin_mm / mm_per_texel);
     const Eigen::VectorXd neutral_beta = Eigen::VectorXd::Zero(rig.num_expressions());
     const cv::Mat neutral_distance = truth.SurfaceDistance(neutral_beta, meshes[0], options.exact_phong_alpha);
     for (size_t j = 0; j < meshes.size(); ++j) {

@@ -353,17 +353,12 @@ TriMesh BuildHiResSurface(const HiResLayout& layout, const TriMesh& coarse, cons
   Require(displacement.type() == CV_32F && displacement.rows == Rm && displacement.cols == Rm,
           fmt::format("BuildHiResSurface: displacement must be CV_32F {}×{}", Rm, Rm));
   Require(displacement.isContinuous(), "BuildHiResSurface: displacement must be continuous");
-  CheckCoarse(layout, coarse, phong_alpha);
   TriMesh mesh;
   const int nv = layout.num_vertices();
-  mesh.V.resize(nv, 3);
-  const MatX3d smooth = SmoothPositions(layout, coarse);
+  MatX3d N;  // the interpolated coarse normals
+  InterpolateCoarse(layout, coarse, &mesh.V, &N, phong_alpha);
   tbb::parallel_for(tbb::blocked_range<int>(0, nv, 8192), [&](const tbb::blocked_range<int>& r) {
-    for (int v = r.begin(); v < r.end(); ++v) {
-      Eigen::RowVector3d p, n;
-      CoarseAt(layout, coarse, smooth, v, phong_alpha, &p, &n);
-      mesh.V.row(v) = p + layout.SampleMap(displacement, v) * n;
-    }
+    for (int v = r.begin(); v < r.end(); ++v) mesh.V.row(v) += layout.SampleMap(displacement, v) * N.row(v);
   });
   mesh.F = layout.F;
   mesh.UV = layout.UV;
@@ -383,17 +378,12 @@ TriMesh BuildHiResSurface(const HiResLayout& layout, const TriMesh& coarse, cons
       const Eigen::RowVector3d dv = diff(at(i, j - 1), at(i, j + 1));
       Eigen::RowVector3d n = du.cross(dv);
       const double len = n.norm();
-      const int t = layout.triangle[v];
-      const Eigen::Vector3f& b = layout.barycentric[v];
-      const Eigen::RowVector3d nc = b[0] * coarse.N.row(coarse.F(t, 0)) + b[1] * coarse.N.row(coarse.F(t, 1)) +
-                                    b[2] * coarse.N.row(coarse.F(t, 2));
       if (len <= 1e-20) {
-        const double lc = nc.norm();
-        mesh.N.row(v) = lc > 0 ? Eigen::RowVector3d(nc / lc) : Eigen::RowVector3d(0, 0, 0);
+        mesh.N.row(v) = N.row(v);
         continue;
       }
       n /= len;
-      if (n.dot(nc) < 0) n = -n;
+      if (n.dot(N.row(v)) < 0) n = -n;
       mesh.N.row(v) = n;
     }
   });
